@@ -1,0 +1,337 @@
+//! N copies of one task against one shared model, stepped in parallel on a rayon pool, with
+//! automatic resets and struct-of-arrays outputs ready to be uploaded to a GPU.
+use std::sync::Arc;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use rayon::prelude::*;
+
+use super::{Env, SimError, TaskModel};
+use crate::tasks::TaskName;
+
+/// How to build a [`BatchedEnv`].
+#[derive(Debug, Clone)]
+pub struct BatchConfig {
+    pub task: TaskName,
+    pub envs: usize,
+    /// Worker threads of the pool that steps the copies.
+    pub threads: usize,
+    /// Copy `i` draws from ChaCha8 stream `i` of this seed, whatever the thread count.
+    pub seed: u64,
+    /// σ of the Gaussian actuator noise: the executed action is `clip(a + N(0, σ²))` (SPEC §1).
+    pub actuator_noise: f64,
+}
+
+/// One copy with its own random stream and scratch space.
+struct Copy {
+    env: Env,
+    rng: ChaCha8Rng,
+    executed_action: Vec<f64>,
+    obs: Vec<f64>,
+    episode_return: f64,
+}
+
+/// The outputs of one copy in one step, as slices of the batch arrays.
+struct CopyOutputs<'a> {
+    obs: &'a mut [f32],
+    final_obs: &'a mut [f32],
+    reward: &'a mut f32,
+    terminated: &'a mut u32,
+    truncated: &'a mut u32,
+    episode_return: &'a mut f32,
+    episode_length: &'a mut u32,
+}
+
+/// A batch of copies of one task. After every [`BatchedEnv::step`], row `i` of each array
+/// belongs to copy `i`. A copy whose episode ended has already been reset: its row of
+/// `observations` is the first observation of the new episode, and `final_observations`,
+/// `episode_returns` and `episode_lengths` hold what the finished episode ended with.
+pub struct BatchedEnv {
+    model: Arc<TaskModel>,
+    copies: Vec<Copy>,
+    pool: rayon::ThreadPool,
+    actuator_noise: Option<Normal<f64>>,
+    observations: Vec<f32>,
+    final_observations: Vec<f32>,
+    rewards: Vec<f32>,
+    terminated: Vec<u32>,
+    truncated: Vec<u32>,
+    episode_returns: Vec<f32>,
+    episode_lengths: Vec<u32>,
+}
+
+impl BatchedEnv {
+    pub fn new(config: &BatchConfig) -> Result<BatchedEnv, SimError> {
+        if config.envs == 0 {
+            return Err(SimError::TooSmall {
+                what: "the number of environment copies",
+                found: 0.0,
+                min: 1.0,
+            });
+        }
+        if config.threads == 0 {
+            return Err(SimError::TooSmall {
+                what: "the number of threads",
+                found: 0.0,
+                min: 1.0,
+            });
+        }
+        let sigma = config.actuator_noise;
+        if !(sigma.is_finite() && sigma >= 0.0) {
+            return Err(SimError::TooSmall {
+                what: "the actuator noise σ (finite)",
+                found: sigma,
+                min: 0.0,
+            });
+        }
+        let actuator_noise =
+            (sigma > 0.0).then(|| Normal::new(0.0, sigma).expect("σ is finite and positive"));
+        let model = TaskModel::load(config.task)?;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(config.threads)
+            .build()
+            .map_err(|e| SimError::ThreadPool {
+                threads: config.threads,
+                message: e.to_string(),
+            })?;
+        let (n, obs_dim) = (config.envs, model.task.obs_dim);
+        let copies = (0..n)
+            .map(|i| {
+                let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+                rng.set_stream(i as u64);
+                Copy {
+                    env: Env::new(model.clone()),
+                    rng,
+                    executed_action: vec![0.0; model.task.act_dim],
+                    obs: vec![0.0; obs_dim],
+                    episode_return: 0.0,
+                }
+            })
+            .collect();
+        let mut batch = BatchedEnv {
+            model,
+            copies,
+            pool,
+            actuator_noise,
+            observations: vec![0.0; n * obs_dim],
+            final_observations: vec![0.0; n * obs_dim],
+            rewards: vec![0.0; n],
+            terminated: vec![0; n],
+            truncated: vec![0; n],
+            episode_returns: vec![0.0; n],
+            episode_lengths: vec![0; n],
+        };
+        batch.reset_all();
+        Ok(batch)
+    }
+
+    /// Resets every copy (each from its own random stream) and clears the step outputs.
+    pub fn reset_all(&mut self) {
+        let obs_dim = self.obs_dim();
+        self.pool.install(|| {
+            (
+                self.copies.par_iter_mut(),
+                self.observations.par_chunks_mut(obs_dim),
+            )
+                .into_par_iter()
+                .for_each(|(copy, obs)| {
+                    copy.env.reset(&mut copy.rng);
+                    copy.episode_return = 0.0;
+                    copy.env.observe(&mut copy.obs);
+                    write_f32(obs, &copy.obs);
+                });
+        });
+        self.rewards.fill(0.0);
+        self.terminated.fill(0);
+        self.truncated.fill(0);
+    }
+
+    /// Applies `actions` (`[N, act_dim]`, row `i` to copy `i`) and steps every copy once.
+    pub fn step(&mut self, actions: &[f32]) -> Result<(), SimError> {
+        let (obs_dim, act_dim) = (self.obs_dim(), self.act_dim());
+        let expected = self.copies.len() * act_dim;
+        if actions.len() != expected {
+            return Err(SimError::WrongLength {
+                what: "the batch of actions",
+                found: actions.len(),
+                expected,
+            });
+        }
+        let noise = self.actuator_noise;
+        let model = &self.model;
+        // Small enough chunks that the threads finish together, big enough that the pool's
+        // overhead stays small for cheap tasks.
+        let min_len = (self.copies.len() / (64 * self.pool.current_num_threads())).max(1);
+        self.pool.install(|| {
+            (
+                self.copies.par_iter_mut(),
+                actions.par_chunks(act_dim),
+                self.observations.par_chunks_mut(obs_dim),
+                self.final_observations.par_chunks_mut(obs_dim),
+                self.rewards.par_iter_mut(),
+                self.terminated.par_iter_mut(),
+                self.truncated.par_iter_mut(),
+                self.episode_returns.par_iter_mut(),
+                self.episode_lengths.par_iter_mut(),
+            )
+                .into_par_iter()
+                .with_min_len(min_len)
+                .for_each(
+                    |(copy, action, obs, final_obs, reward, terminated, truncated, ret, len)| {
+                        let out = CopyOutputs {
+                            obs,
+                            final_obs,
+                            reward,
+                            terminated,
+                            truncated,
+                            episode_return: ret,
+                            episode_length: len,
+                        };
+                        copy.step(model, action, noise, out);
+                    },
+                );
+        });
+        Ok(())
+    }
+
+    pub fn task(&self) -> TaskName {
+        self.model.task.name
+    }
+    pub fn len(&self) -> usize {
+        self.copies.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.copies.is_empty()
+    }
+    pub fn obs_dim(&self) -> usize {
+        self.model.task.obs_dim
+    }
+    pub fn act_dim(&self) -> usize {
+        self.model.task.act_dim
+    }
+    pub fn threads(&self) -> usize {
+        self.pool.current_num_threads()
+    }
+    /// Lower and upper bounds of each action dimension.
+    pub fn action_bounds(&self) -> (&[f64], &[f64]) {
+        (&self.model.action_low, &self.model.action_high)
+    }
+    /// `[N, obs_dim]`: the current observation of every copy.
+    pub fn observations(&self) -> &[f32] {
+        &self.observations
+    }
+    /// `[N, obs_dim]`: the last observation of an episode that ended this step (rows of copies
+    /// whose `terminated` or `truncated` flag is set; other rows are stale).
+    pub fn final_observations(&self) -> &[f32] {
+        &self.final_observations
+    }
+    /// `[N]`: the reward of the last step.
+    pub fn rewards(&self) -> &[f32] {
+        &self.rewards
+    }
+    /// `[N]`: 1 where the last step ended the MDP.
+    pub fn terminated(&self) -> &[u32] {
+        &self.terminated
+    }
+    /// `[N]`: 1 where the last step hit the time limit.
+    pub fn truncated(&self) -> &[u32] {
+        &self.truncated
+    }
+    /// `[N]`: the undiscounted return of the episode that ended this step (where done).
+    pub fn episode_returns(&self) -> &[f32] {
+        &self.episode_returns
+    }
+    /// `[N]`: the length of the episode that ended this step (where done).
+    pub fn episode_lengths(&self) -> &[u32] {
+        &self.episode_lengths
+    }
+}
+
+impl Copy {
+    fn step(
+        &mut self,
+        model: &TaskModel,
+        action: &[f32],
+        noise: Option<Normal<f64>>,
+        out: CopyOutputs<'_>,
+    ) {
+        executed_action(
+            action,
+            noise,
+            &mut self.rng,
+            model,
+            &mut self.executed_action,
+        );
+        let outcome = self.env.step(&self.executed_action, &mut self.obs);
+        self.episode_return += outcome.reward;
+        *out.reward = outcome.reward as f32;
+        *out.terminated = outcome.terminated as u32;
+        *out.truncated = outcome.truncated as u32;
+        if outcome.done() {
+            write_f32(out.final_obs, &self.obs);
+            *out.episode_return = self.episode_return as f32;
+            *out.episode_length = self.env.elapsed();
+            self.episode_return = 0.0;
+            self.env.reset(&mut self.rng);
+            self.env.observe(&mut self.obs);
+        }
+        write_f32(out.obs, &self.obs);
+    }
+}
+
+/// The action the actuators receive: the chosen one, or `clip(a + N(0, σ²))` under actuator
+/// noise (SPEC §1). Without noise it is passed on unclipped, as Gymnasium does.
+fn executed_action(
+    action: &[f32],
+    noise: Option<Normal<f64>>,
+    rng: &mut ChaCha8Rng,
+    model: &TaskModel,
+    out: &mut [f64],
+) {
+    for (i, (executed, &a)) in out.iter_mut().zip(action).enumerate() {
+        *executed = match noise {
+            Some(n) => (a as f64 + n.sample(rng)).clamp(model.action_low[i], model.action_high[i]),
+            None => a as f64,
+        };
+    }
+}
+
+fn write_f32(out: &mut [f32], values: &[f64]) {
+    for (o, v) in out.iter_mut().zip(values) {
+        *o = *v as f32;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn actuator_noise_is_added_then_clipped_to_the_control_range() {
+        let model = TaskModel::load(TaskName::HalfCheetah).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut out = vec![0.0; 6];
+        let chosen = [0.5f32, -0.5, 0.0, 0.9, -0.9, 2.0];
+        executed_action(&chosen, None, &mut rng, &model, &mut out);
+        assert_eq!(
+            out,
+            chosen.map(f64::from).to_vec(),
+            "no noise: passed on as chosen"
+        );
+        let huge = Normal::new(0.0, 1e6).unwrap();
+        executed_action(&chosen, Some(huge), &mut rng, &model, &mut out);
+        assert!(
+            out.iter().all(|a| a.abs() == 1.0),
+            "clipped to [-1, 1]: {out:?}"
+        );
+        let small = Normal::new(0.0, 0.01).unwrap();
+        let mut twin = ChaCha8Rng::seed_from_u64(4);
+        executed_action(&chosen[..5], Some(small), &mut twin, &model, &mut out[..5]);
+        let mut replay = ChaCha8Rng::seed_from_u64(4);
+        for (i, &a) in chosen[..5].iter().enumerate() {
+            let expected = (a as f64 + small.sample(&mut replay)).clamp(-1.0, 1.0);
+            assert_eq!(out[i], expected);
+        }
+    }
+}

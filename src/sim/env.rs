@@ -1,0 +1,144 @@
+//! One simulation copy with Gymnasium v4's step, reset and time-limit semantics.
+use std::sync::Arc;
+
+use mujoco_rs::prelude::MjData;
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use super::{MAX_EPISODE_STEPS, SimError, TaskModel, check_vector};
+use crate::tasks::{Progress, ResetNoise, SimData};
+
+/// What one environment step returned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepOutcome {
+    pub reward: f64,
+    /// The MDP ended (no bootstrapping).
+    pub terminated: bool,
+    /// The time limit ended the episode (bootstrap from the last state).
+    pub truncated: bool,
+}
+
+impl StepOutcome {
+    pub fn done(&self) -> bool {
+        self.terminated || self.truncated
+    }
+}
+
+/// One copy of a task.
+pub struct Env {
+    model: Arc<TaskModel>,
+    data: SimData,
+    /// Steps since the last reset (Gymnasium's `TimeLimit` counter).
+    elapsed: u32,
+}
+
+impl Env {
+    /// A copy in MuJoCo's initial state (`qpos0`, zero velocity), not yet reset with noise.
+    pub fn new(model: Arc<TaskModel>) -> Env {
+        let mut data = MjData::new(model.model.clone());
+        data.forward();
+        Env {
+            model,
+            data,
+            elapsed: 0,
+        }
+    }
+
+    pub fn model(&self) -> &TaskModel {
+        &self.model
+    }
+
+    /// Steps taken since the last reset or `set_state`.
+    pub fn elapsed(&self) -> u32 {
+        self.elapsed
+    }
+
+    /// `mj_resetData`, the task's reset noise on `qpos0` / zero `qvel`, then `mj_forward`.
+    pub fn reset(&mut self, rng: &mut impl Rng) {
+        let m = &self.model;
+        let (qpos, qvel): (Vec<f64>, Vec<f64>) = match m.task.reset_noise {
+            ResetNoise::Uniform { scale } => (
+                m.init_qpos
+                    .iter()
+                    .map(|q| q + rng.random_range(-scale..scale))
+                    .collect(),
+                (0..m.nv).map(|_| rng.random_range(-scale..scale)).collect(),
+            ),
+            ResetNoise::UniformPositionNormalVelocity { scale } => (
+                m.init_qpos
+                    .iter()
+                    .map(|q| q + rng.random_range(-scale..scale))
+                    .collect(),
+                (0..m.nv)
+                    .map(|_| {
+                        scale * <StandardNormal as Distribution<f64>>::sample(&StandardNormal, rng)
+                    })
+                    .collect(),
+            ),
+        };
+        self.data.reset();
+        self.write_state(&qpos, &qvel);
+    }
+
+    /// Gymnasium's `set_state`: copy `qpos`/`qvel` in, then `mj_forward`; restarts the time limit.
+    pub fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), SimError> {
+        check_vector("qpos", qpos, self.model.nq)?;
+        check_vector("qvel", qvel, self.model.nv)?;
+        self.write_state(qpos, qvel);
+        Ok(())
+    }
+
+    fn write_state(&mut self, qpos: &[f64], qvel: &[f64]) {
+        self.data.qpos_mut().copy_from_slice(qpos);
+        self.data.qvel_mut().copy_from_slice(qvel);
+        self.data.forward();
+        self.elapsed = 0;
+    }
+
+    /// The task's observation of the current state.
+    pub fn observe(&self, out: &mut [f64]) {
+        (self.model.task.observe)(&self.data, out)
+    }
+
+    /// `ctrl = action`, `mj_step` × frame_skip, `mj_rnePostConstraint`; writes the new
+    /// observation into `obs`. The action is not clipped (MuJoCo clamps controls itself), and
+    /// the control cost uses it as given, as in Gymnasium.
+    pub fn step(&mut self, action: &[f64], obs: &mut [f64]) -> StepOutcome {
+        let task = self.model.task;
+        let before = self.progress();
+        self.data.ctrl_mut().copy_from_slice(action);
+        for _ in 0..task.frame_skip {
+            self.data.step();
+        }
+        self.data.rne_post_constraint();
+        let velocity = (self.progress() - before) / self.model.dt;
+        let ctrl_cost = task.ctrl_cost_weight * action.iter().map(|a| a * a).sum::<f64>();
+        let reward = task.forward_weight * velocity + task.healthy_reward - ctrl_cost;
+        self.observe(obs);
+        self.elapsed += 1;
+        StepOutcome {
+            reward,
+            terminated: (task.terminated)(&self.data),
+            truncated: self.elapsed >= MAX_EPISODE_STEPS,
+        }
+    }
+
+    /// The coordinate whose change per `dt` is the forward velocity of the reward.
+    fn progress(&self) -> f64 {
+        let m = &self.model;
+        match m.task.progress {
+            Progress::None => 0.0,
+            Progress::RootX => self.data.qpos()[0],
+            Progress::BodyX { .. } => self.data.xpos()[m.progress_body][0],
+            Progress::CenterOfMassX => {
+                let weighted: f64 = m
+                    .body_mass
+                    .iter()
+                    .zip(self.data.xipos())
+                    .map(|(mass, p)| mass * p[0])
+                    .sum();
+                weighted / m.total_mass
+            }
+        }
+    }
+}

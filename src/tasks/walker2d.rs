@@ -1,0 +1,30 @@
+//! Walker2d-v4: walk forward without falling.
+use super::{Progress, ResetNoise, SimData, TaskDef, TaskName, put, put_clipped, strictly_between};
+
+pub static WALKER2D: TaskDef = TaskDef {
+    name: TaskName::Walker2d,
+    xml: "walker2d.xml",
+    frame_skip: 4,
+    obs_dim: 17,
+    act_dim: 6,
+    reset_noise: ResetNoise::Uniform { scale: 5e-3 },
+    progress: Progress::RootX,
+    forward_weight: 1.0,
+    healthy_reward: 1.0,
+    ctrl_cost_weight: 1e-3,
+    observe,
+    terminated,
+};
+
+/// qpos[1:] ++ clip(qvel, ±10).
+fn observe(data: &SimData, out: &mut [f64]) {
+    let mut at = 0;
+    put(out, &mut at, &data.qpos()[1..]);
+    put_clipped(out, &mut at, data.qvel(), 10.0);
+}
+
+/// Unhealthy unless 0.8 < z < 2.0 and −1 < angle < 1.
+fn terminated(data: &SimData) -> bool {
+    let qpos = data.qpos();
+    !(strictly_between(qpos[1], 0.8, 2.0) && strictly_between(qpos[2], -1.0, 1.0))
+}

@@ -1,0 +1,170 @@
+//! The command line: bad input is a clear error (exit code 2 for usage, 1 otherwise), never a panic.
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn dhrl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+/// Runs `dhrl rollout` on inverted-pendulum (nq = nv = 2, one action dimension).
+fn rollout(state: &str, actions: &str) -> Output {
+    let dir = tempfile::tempdir().unwrap();
+    let state = write(dir.path(), "state.json", state);
+    let actions = write(dir.path(), "actions.csv", actions);
+    dhrl(&[
+        "rollout",
+        "--task",
+        "inverted-pendulum",
+        "--init-state",
+        &state,
+        "--actions",
+        &actions,
+    ])
+}
+
+fn assert_error(out: &Output, needle: &str) {
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(out));
+    assert!(
+        stderr(out).contains(needle),
+        "expected '{needle}' in: {}",
+        stderr(out)
+    );
+    assert!(!stderr(out).contains("panicked"), "{}", stderr(out));
+}
+
+#[test]
+fn rollout_prints_one_json_object_per_step_and_stops_at_the_end() {
+    let out = rollout(
+        r#"{"qpos": [0.0, 0.19], "qvel": [0.0, 1.0]}"#,
+        "0.0\n0.0\n0.0\n0.0\n0.0\n0.0\n0.0\n0.0\n0.0\n0.0\n",
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(
+        lines[0],
+        serde_json::json!({"t": 0, "obs": [0.0, 0.19, 0.0, 1.0]})
+    );
+    let last = lines.last().unwrap();
+    assert_eq!(
+        last["terminated"], true,
+        "the pole starts falling past 0.2 rad"
+    );
+    assert!(
+        lines.len() < 11,
+        "stops after the step that ends the episode"
+    );
+    for (t, line) in lines.iter().enumerate().skip(1) {
+        assert_eq!(line["t"], t);
+        assert_eq!(line["reward"], 1.0);
+        assert_eq!(line["truncated"], false);
+    }
+}
+
+#[test]
+fn rollout_rejects_wrong_state_dimensions() {
+    assert_error(
+        &rollout(r#"{"qpos": [0.0], "qvel": [0.0, 0.0]}"#, "0\n"),
+        "qpos has length 1, expected 2",
+    );
+    assert_error(
+        &rollout(r#"{"qpos": [0.0, 0.0]}"#, "0\n"),
+        "missing field `qvel`",
+    );
+}
+
+#[test]
+fn rollout_rejects_non_finite_numbers() {
+    assert_error(
+        &rollout(r#"{"qpos": [0.0, 1e999], "qvel": [0.0, 0.0]}"#, "0\n"),
+        "not a state file",
+    );
+    assert_error(
+        &rollout(r#"{"qpos": [0.0, 0.0], "qvel": [0.0, 0.0]}"#, "0.1\nNaN\n"),
+        "line 2: value NaN is not finite",
+    );
+    assert_error(
+        &rollout(r#"{"qpos": [0.0, 0.0], "qvel": [0.0, 0.0]}"#, "inf\n"),
+        "line 1: value inf is not finite",
+    );
+}
+
+#[test]
+fn rollout_rejects_wrong_action_width_and_garbage() {
+    let state = r#"{"qpos": [0.0, 0.0], "qvel": [0.0, 0.0]}"#;
+    assert_error(
+        &rollout(state, "0.1\n0.1,0.2\n"),
+        "line 2: 2 values, but inverted-pendulum takes actions of 1",
+    );
+    assert_error(
+        &rollout(state, "0.1\nabc\n"),
+        "line 2: 'abc' is not a number",
+    );
+}
+
+#[test]
+fn unknown_task_lists_valid_names() {
+    let out = dhrl(&[
+        "rollout",
+        "--task",
+        "cheetah",
+        "--init-state",
+        "x",
+        "--actions",
+        "y",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let msg = stderr(&out);
+    for name in [
+        "ant",
+        "half-cheetah",
+        "hopper",
+        "walker2d",
+        "humanoid",
+        "inverted-pendulum",
+    ] {
+        assert!(msg.contains(name), "{msg}");
+    }
+}
+
+#[test]
+fn bench_env_json_has_the_anchor_side_by_side() {
+    let out = dhrl(&[
+        "bench",
+        "env",
+        "--task",
+        "inverted-pendulum",
+        "--envs",
+        "8",
+        "--threads",
+        "1",
+        "--steps",
+        "5",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let (ours, raw, ratio) = (
+        report["env_steps_per_sec"].as_f64().unwrap(),
+        report["raw_env_steps_per_sec"].as_f64().unwrap(),
+        report["ratio"].as_f64().unwrap(),
+    );
+    assert!(ours > 0.0 && raw > 0.0);
+    assert!((ratio - ours / raw).abs() < 1e-9 * ratio);
+}
