@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand};
 
 use dhrl::bench::bench_env;
 use dhrl::rollout::{read_actions, read_state, rollout};
+use dhrl::tabular::{TabularArgs, TabularBenchArgs, run_tabular, run_tabular_bench};
 use dhrl::tasks::TaskName;
 
 #[derive(Parser)]
@@ -27,6 +28,10 @@ enum Command {
     /// Measure throughput.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Finite-domain DHRL: augmented MDP, belief abstraction and the paper's guarantees.
+    Tabular(TabularArgs),
+    /// Q-learning sample complexity on the augmented vs the abstract MDP, across delays.
+    TabularBench(TabularBenchArgs),
 }
 
 #[derive(Args)]
@@ -71,6 +76,8 @@ fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Rollout(args) => run_rollout(&args),
         Command::Bench(BenchCommand::Env(args)) => run_bench_env(&args),
+        Command::Tabular(args) => run_tabular(&args),
+        Command::TabularBench(args) => run_tabular_bench(&args),
     }
 }
 

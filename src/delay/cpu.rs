@@ -1,0 +1,389 @@
+//! The reference implementation of the delay layer, and the CPU fallback.
+use rayon::prelude::*;
+
+use super::layout::{
+    CopyCounters, DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED, RecordMeta,
+};
+use super::records::{RecordBatch, StepInput};
+use super::warmup::WarmupFiller;
+use super::{DelayConfig, DelayError};
+
+/// The delay layer on the CPU: per copy, a ring of the last 2Δ + 3 steps `(s_τ, a_τ, r_τ)`.
+pub struct CpuDelayLayer {
+    layout: DelayLayout,
+    warmup: WarmupFiller,
+    counters: Vec<CopyCounters>,
+    /// `[N, 2Δ + 3, obs + act + 1]`
+    ring: Vec<f32>,
+    /// `[N, obs + Δ·act]`
+    augmented: Vec<f32>,
+    /// `[N]`
+    ready: Vec<u32>,
+    records: RecordBatch,
+}
+
+/// Time-aligned transitions `(x_τ, s_τ, a_τ, r_τ, x_{τ+1}, s_{τ+1}, terminated_{τ+1})`, one row
+/// each, for every record of a step with `τ ≥ Δ` (where `x_τ` exists).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Transitions {
+    pub copy: Vec<usize>,
+    pub episode: Vec<u32>,
+    pub tau: Vec<u32>,
+    pub augmented: Vec<f32>,
+    pub state: Vec<f32>,
+    pub action: Vec<f32>,
+    pub reward: Vec<f32>,
+    pub next_augmented: Vec<f32>,
+    pub next_state: Vec<f32>,
+    /// 1 where the MDP ended (no bootstrapping); truncation is 0 (bootstrap).
+    pub terminated: Vec<u32>,
+}
+
+impl Transitions {
+    pub fn len(&self) -> usize {
+        self.copy.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.copy.is_empty()
+    }
+}
+
+/// The inputs of one copy for one step.
+pub(super) struct CopyInput<'a> {
+    pub action: &'a [f32],
+    pub observation: &'a [f32],
+    pub final_observation: &'a [f32],
+    pub reward: f32,
+    pub terminated: bool,
+    pub truncated: bool,
+}
+
+/// The outputs of one copy, as slices of the batch arrays.
+pub(super) struct CopyState<'a> {
+    pub counters: &'a mut CopyCounters,
+    pub ring: &'a mut [f32],
+    pub augmented: &'a mut [f32],
+    pub meta: &'a mut [RecordMeta],
+    pub data: &'a mut [f32],
+}
+
+impl CpuDelayLayer {
+    /// A layer for `copies` copies of a task with the given observation size and action bounds.
+    pub fn new(
+        config: &DelayConfig,
+        copies: usize,
+        obs_dim: usize,
+        action_low: &[f64],
+        action_high: &[f64],
+        seed: u64,
+    ) -> Result<CpuDelayLayer, DelayError> {
+        let delay = config.total_delay()?;
+        let layout = DelayLayout {
+            copies,
+            obs_dim,
+            act_dim: action_low.len(),
+            delay,
+        };
+        Ok(CpuDelayLayer {
+            layout,
+            warmup: WarmupFiller::new(config.warmup, action_low, action_high, seed),
+            counters: vec![CopyCounters::default(); copies],
+            ring: vec![0.0; copies * layout.ring_len() * layout.stride()],
+            augmented: vec![0.0; copies * layout.augmented_dim()],
+            ready: vec![0; copies],
+            records: RecordBatch::new(layout),
+        })
+    }
+
+    pub fn layout(&self) -> DelayLayout {
+        self.layout
+    }
+
+    /// Starts every copy's first episode from `observations` (`[N, obs_dim]`, the `s_0`s).
+    pub fn reset(&mut self, observations: &[f32]) -> Result<(), DelayError> {
+        let l = self.layout;
+        check_len(
+            "initial observations",
+            observations.len(),
+            l.copies * l.obs_dim,
+        )?;
+        self.ring.fill(0.0);
+        self.records = RecordBatch::new(l);
+        let (ring_len, stride) = (l.ring_len(), l.stride());
+        for (i, s0) in observations.chunks(l.obs_dim).enumerate() {
+            let mut copy = CopyState {
+                counters: &mut self.counters[i],
+                ring: &mut self.ring[i * ring_len * stride..(i + 1) * ring_len * stride],
+                augmented: &mut self.augmented[i * l.augmented_dim()..(i + 1) * l.augmented_dim()],
+                meta: &mut [],
+                data: &mut [],
+            };
+            *copy.counters = CopyCounters::default();
+            start_episode(&l, &mut copy, s0, false);
+            self.ready[i] = copy.counters.ready;
+        }
+        Ok(())
+    }
+
+    /// Records one step of the undelayed batch and updates augmented states and records.
+    pub fn step(&mut self, input: &StepInput<'_>) -> Result<(), DelayError> {
+        let l = self.layout;
+        input.check(&l)?;
+        let (obs, act) = (l.obs_dim, l.act_dim);
+        (
+            self.counters.par_iter_mut(),
+            self.ring.par_chunks_mut(l.ring_len() * l.stride()),
+            self.augmented.par_chunks_mut(l.augmented_dim()),
+            self.records.meta.par_chunks_mut(l.record_slots()),
+            self.records
+                .data
+                .par_chunks_mut(l.record_slots() * l.stride()),
+            input.actions.par_chunks(act),
+            input.observations.par_chunks(obs),
+            input.final_observations.par_chunks(obs),
+            input.rewards.par_iter(),
+            input.terminated.par_iter(),
+            input.truncated.par_iter(),
+        )
+            .into_par_iter()
+            .with_min_len(64)
+            .for_each(
+                |(
+                    counters,
+                    ring,
+                    augmented,
+                    meta,
+                    data,
+                    action,
+                    observation,
+                    final_observation,
+                    &reward,
+                    &terminated,
+                    &truncated,
+                )| {
+                    let input = CopyInput {
+                        action,
+                        observation,
+                        final_observation,
+                        reward,
+                        terminated: terminated != 0,
+                        truncated: truncated != 0,
+                    };
+                    step_copy(
+                        &l,
+                        &mut CopyState {
+                            counters,
+                            ring,
+                            augmented,
+                            meta,
+                            data,
+                        },
+                        &input,
+                    );
+                },
+            );
+        for (ready, c) in self.ready.iter_mut().zip(&self.counters) {
+            *ready = c.ready;
+        }
+        self.records.set_counts(&self.counters);
+        Ok(())
+    }
+
+    /// Overwrites the rows of `actions` (`[N, act_dim]`) of copies still in warm-up (`t < Δ`,
+    /// nothing observed yet) with warm-up actions: uniform random in the bounds, or zeros.
+    pub fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), DelayError> {
+        check_len(
+            "actions",
+            actions.len(),
+            self.layout.copies * self.layout.act_dim,
+        )?;
+        self.warmup
+            .fill(actions, self.ready.iter().map(|&r| r != 0));
+        Ok(())
+    }
+
+    /// `[N, obs + Δ·act]`: `x_t` of every copy (zeros where not ready).
+    pub fn augmented(&self) -> &[f32] {
+        &self.augmented
+    }
+
+    /// `[N]`: 1 where `x_t` exists and the policy acts, 0 during warm-up.
+    pub fn ready(&self) -> &[u32] {
+        &self.ready
+    }
+
+    pub fn counters(&self) -> &[CopyCounters] {
+        &self.counters
+    }
+
+    /// The step records completed by the last step.
+    pub fn records(&self) -> &RecordBatch {
+        &self.records
+    }
+
+    /// The transitions completed by the last step, written out in full (`x` verbatim).
+    pub fn transitions(&self) -> Transitions {
+        let l = self.layout;
+        let (ring_len, stride) = (l.ring_len(), l.stride());
+        let mut out = Transitions::default();
+        for record in self.records.iter() {
+            if record.is_final_state() || (record.meta.tau as usize) < l.delay {
+                continue;
+            }
+            let ring =
+                &self.ring[record.copy * ring_len * stride..(record.copy + 1) * ring_len * stride];
+            let slot = record.meta.slot as usize;
+            let next = (slot + 1) % ring_len;
+            out.copy.push(record.copy);
+            out.episode.push(record.meta.episode);
+            out.tau.push(record.meta.tau);
+            write_augmented(&l, ring, slot, &mut out.augmented);
+            out.state.extend_from_slice(record.state);
+            out.action.extend_from_slice(record.action);
+            out.reward.push(record.reward);
+            write_augmented(&l, ring, next, &mut out.next_augmented);
+            out.next_state
+                .extend_from_slice(&ring[next * stride..next * stride + l.obs_dim]);
+            out.terminated
+                .push(u32::from(record.meta.flags & RECORD_TERMINATED != 0));
+        }
+        out
+    }
+}
+
+pub(super) fn check_len(
+    what: &'static str,
+    found: usize,
+    expected: usize,
+) -> Result<(), DelayError> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(DelayError::WrongLength {
+            what,
+            found,
+            expected,
+        })
+    }
+}
+
+/// Appends `x` of the step in ring slot `slot`: the state Δ slots back, then the Δ actions
+/// from there on, oldest first.
+fn write_augmented(l: &DelayLayout, ring: &[f32], slot: usize, out: &mut Vec<f32>) {
+    let (ring_len, stride) = (l.ring_len(), l.stride());
+    let oldest = (slot + ring_len - l.delay) % ring_len;
+    out.extend_from_slice(&ring[oldest * stride..oldest * stride + l.obs_dim]);
+    for k in 0..l.delay {
+        let s = (oldest + k) % ring_len;
+        out.extend_from_slice(&ring[s * stride + l.obs_dim..s * stride + l.obs_dim + l.act_dim]);
+    }
+}
+
+/// Puts `s_0` of a new episode at the cursor (advanced past the last episode's `s_T` when
+/// `advance`) and rebuilds `x_0`.
+fn start_episode(l: &DelayLayout, copy: &mut CopyState<'_>, s0: &[f32], advance: bool) {
+    let c = &mut *copy.counters;
+    let stride = l.stride();
+    if advance {
+        c.cursor = (c.cursor + 1) % l.ring_len() as u32;
+    }
+    c.t = 0;
+    let at = c.cursor as usize * stride;
+    copy.ring[at..at + l.obs_dim].copy_from_slice(s0);
+    copy.ring[at + l.obs_dim..at + stride].fill(0.0);
+    update_augmented(l, copy);
+}
+
+/// One step of one copy: store `a_t, r_t` beside `s_t`, store `s_{t+1}`, emit the records that
+/// completed, start the next episode where this one ended, and rebuild `x`.
+pub(super) fn step_copy(l: &DelayLayout, copy: &mut CopyState<'_>, input: &CopyInput<'_>) {
+    let (ring_len, stride, obs) = (l.ring_len() as u32, l.stride(), l.obs_dim);
+    let done = input.terminated || input.truncated;
+    let c = &mut *copy.counters;
+    let at = c.cursor as usize * stride;
+    copy.ring[at + obs..at + obs + l.act_dim].copy_from_slice(input.action);
+    copy.ring[at + stride - 1] = input.reward;
+    c.cursor = (c.cursor + 1) % ring_len;
+    c.t += 1;
+    let at = c.cursor as usize * stride;
+    let next_state = if done {
+        input.final_observation
+    } else {
+        input.observation
+    };
+    copy.ring[at..at + obs].copy_from_slice(next_state);
+    copy.ring[at + obs..at + stride].fill(0.0);
+    c.record_count = 0;
+
+    // Record τ completes when s_{τ+1} arrives: τ = t − Δ − 1; an episode end delivers the rest.
+    let t = c.t as i64;
+    let first = t - l.delay as i64 - 1;
+    let taus = if done {
+        first.max(0)..t
+    } else {
+        first.max(0)..(first + 1).max(0)
+    };
+    for tau in taus {
+        let last = tau == t - 1;
+        let flags = if last && input.terminated {
+            RECORD_TERMINATED
+        } else {
+            0
+        } | if last && input.truncated {
+            RECORD_TRUNCATED
+        } else {
+            0
+        };
+        emit_record(l, copy, tau as u32, flags);
+    }
+    if done {
+        let flags = RECORD_FINAL_STATE
+            | if input.terminated {
+                RECORD_TERMINATED
+            } else {
+                0
+            }
+            | if input.truncated { RECORD_TRUNCATED } else { 0 };
+        let t = copy.counters.t;
+        emit_record(l, copy, t, flags);
+        copy.counters.episode += 1;
+        start_episode(l, copy, input.observation, true);
+    } else {
+        update_augmented(l, copy);
+    }
+}
+
+/// Copies step `tau` of the current episode out of the ring into the next record slot.
+fn emit_record(l: &DelayLayout, copy: &mut CopyState<'_>, tau: u32, flags: u32) {
+    let (ring_len, stride) = (l.ring_len() as u32, l.stride());
+    let c = &mut *copy.counters;
+    let slot = (c.cursor + ring_len - (c.t - tau)) % ring_len;
+    let k = c.record_count as usize;
+    copy.meta[k] = RecordMeta {
+        tau,
+        episode: c.episode,
+        flags,
+        slot,
+    };
+    let from = slot as usize * stride;
+    copy.data[k * stride..(k + 1) * stride].copy_from_slice(&copy.ring[from..from + stride]);
+    c.record_count += 1;
+}
+
+/// `x_t` from the ring, or zeros while `t < Δ`.
+fn update_augmented(l: &DelayLayout, copy: &mut CopyState<'_>) {
+    let c = &mut *copy.counters;
+    c.ready = u32::from(c.t as usize >= l.delay);
+    if c.ready == 0 {
+        copy.augmented.fill(0.0);
+        return;
+    }
+    let (ring_len, stride, obs, act) = (l.ring_len(), l.stride(), l.obs_dim, l.act_dim);
+    let oldest = (c.cursor as usize + ring_len - l.delay) % ring_len;
+    copy.augmented[..obs].copy_from_slice(&copy.ring[oldest * stride..oldest * stride + obs]);
+    for k in 0..l.delay {
+        let s = (oldest + k) % ring_len;
+        copy.augmented[obs + k * act..obs + (k + 1) * act]
+            .copy_from_slice(&copy.ring[s * stride + obs..s * stride + obs + act]);
+    }
+}

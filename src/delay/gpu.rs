@@ -1,0 +1,421 @@
+//! The delay layer on a GPU: the ring buffers, augmented states and step records live in
+//! `wgpu` storage buffers and `shaders/delay.wgsl` updates them, one invocation per copy.
+//! Each step uploads only what the simulator produced (actions, rewards, flags, new states, and
+//! the first states of episodes that restarted); results are read back only on request.
+use bytemuck::{Pod, Zeroable};
+use wgpu::util::DeviceExt;
+
+use super::cpu::check_len;
+use super::layout::{CopyCounters, DelayLayout, RecordMeta};
+use super::records::{RecordBatch, StepInput};
+use super::warmup::WarmupFiller;
+use super::{DelayConfig, DelayError};
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter available ({0}); the CPU delay layer is the fallback")]
+    NoAdapter(String),
+    #[error("the GPU device could not be opened: {0}")]
+    Device(String),
+    #[error(
+        "{what} needs {bytes} bytes, above this device's storage buffer limit of {limit} bytes; use fewer copies or a shorter delay"
+    )]
+    TooLarge {
+        what: &'static str,
+        bytes: u64,
+        limit: u64,
+    },
+    #[error("reading back from the GPU failed: {0}")]
+    Readback(String),
+    #[error(transparent)]
+    Delay(#[from] DelayError),
+}
+
+/// The uniform block of `shaders/delay.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct Params {
+    copies: u32,
+    obs_dim: u32,
+    act_dim: u32,
+    delay: u32,
+    ring_len: u32,
+    stride: u32,
+    slots: u32,
+    aug_dim: u32,
+    in_stride: u32,
+    reset_base: u32,
+    _pad: [u32; 2],
+}
+
+const WORKGROUP: u32 = 64;
+
+/// The GPU implementation of the delay layer. Same outputs as [`super::CpuDelayLayer`].
+pub struct GpuDelayLayer {
+    layout: DelayLayout,
+    adapter_name: String,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    reset_pipeline: wgpu::ComputePipeline,
+    step_pipeline: wgpu::ComputePipeline,
+    /// Kept alive for the bind group; never read from the host.
+    _params: wgpu::Buffer,
+    _ring: wgpu::Buffer,
+    counters: wgpu::Buffer,
+    augmented: wgpu::Buffer,
+    record_meta: wgpu::Buffer,
+    record_data: wgpu::Buffer,
+    /// Grown on demand: `[N, act + 1 + obs]` rows, then the reset states.
+    input: wgpu::Buffer,
+    input_flags: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    input_scratch: Vec<f32>,
+    flags_scratch: Vec<u32>,
+    warmup: WarmupFiller,
+}
+
+impl GpuDelayLayer {
+    /// Opens the first GPU adapter (software ones included) and allocates the buffers.
+    pub fn new(
+        config: &DelayConfig,
+        copies: usize,
+        obs_dim: usize,
+        action_low: &[f64],
+        action_high: &[f64],
+        seed: u64,
+    ) -> Result<GpuDelayLayer, GpuError> {
+        let delay = config.total_delay()?;
+        let layout = DelayLayout {
+            copies,
+            obs_dim,
+            act_dim: action_low.len(),
+            delay,
+        };
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let adapter_name = format!("{} ({:?}, {:?})", info.name, info.device_type, info.backend);
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("dhrl delay layer"),
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+
+        let n = copies as u64;
+        let f32s = size_of::<f32>() as u64;
+        let sizes = [
+            (
+                "the ring buffers",
+                n * (layout.ring_len() * layout.stride()) as u64 * f32s,
+            ),
+            (
+                "the augmented states",
+                n * layout.augmented_dim() as u64 * f32s,
+            ),
+            (
+                "the step records",
+                n * (layout.record_slots() * layout.stride()) as u64 * f32s,
+            ),
+            (
+                "the step inputs",
+                n * 2 * (obs_dim + layout.act_dim + 1) as u64 * f32s,
+            ),
+        ];
+        let limit = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        if let Some(&(what, bytes)) = sizes.iter().find(|(_, bytes)| *bytes > limit) {
+            return Err(GpuError::TooLarge { what, bytes, limit });
+        }
+
+        let module = device.create_shader_module(wgpu::include_wgsl!("../../shaders/delay.wgsl"));
+        // One layout for both entry points: binding 0 the parameters, 1..=5 the state and
+        // outputs, 6..=7 the step inputs.
+        let buffer_entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let entries: Vec<_> = (0..8)
+            .map(|binding| match binding {
+                0 => buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                1..=5 => buffer_entry(
+                    binding,
+                    wgpu::BufferBindingType::Storage { read_only: false },
+                ),
+                _ => buffer_entry(
+                    binding,
+                    wgpu::BufferBindingType::Storage { read_only: true },
+                ),
+            })
+            .collect();
+        let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("delay layer"),
+            entries: &entries,
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("delay layer"),
+            bind_group_layouts: &[Some(&bind_group_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (reset_pipeline, step_pipeline) = (pipeline("reset"), pipeline("step"));
+
+        let params = Params {
+            copies: copies as u32,
+            obs_dim: obs_dim as u32,
+            act_dim: layout.act_dim as u32,
+            delay: delay as u32,
+            ring_len: layout.ring_len() as u32,
+            stride: layout.stride() as u32,
+            slots: layout.record_slots() as u32,
+            aug_dim: layout.augmented_dim() as u32,
+            in_stride: (layout.act_dim + 1 + obs_dim) as u32,
+            reset_base: (copies * (layout.act_dim + 1 + obs_dim)) as u32,
+            _pad: [0; 2],
+        };
+        let params_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let storage = |label: &str, bytes: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes.max(16),
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let counters = storage("counters", n * size_of::<CopyCounters>() as u64);
+        let ring = storage("ring", sizes[0].1);
+        let augmented = storage("augmented", sizes[1].1);
+        let record_meta = storage(
+            "record meta",
+            n * layout.record_slots() as u64 * size_of::<RecordMeta>() as u64,
+        );
+        let record_data = storage("record data", sizes[2].1);
+        let input = storage("input", sizes[3].1);
+        let input_flags = storage("input flags", n * size_of::<u32>() as u64);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("delay layer"),
+            layout: &bind_group_layout,
+            entries: &[
+                &params_buffer,
+                &counters,
+                &ring,
+                &augmented,
+                &record_meta,
+                &record_data,
+                &input,
+                &input_flags,
+            ]
+            .iter()
+            .enumerate()
+            .map(|(binding, buffer)| wgpu::BindGroupEntry {
+                binding: binding as u32,
+                resource: buffer.as_entire_binding(),
+            })
+            .collect::<Vec<_>>(),
+        });
+        Ok(GpuDelayLayer {
+            layout,
+            adapter_name,
+            device,
+            queue,
+            reset_pipeline,
+            step_pipeline,
+            _params: params_buffer,
+            _ring: ring,
+            counters,
+            augmented,
+            record_meta,
+            record_data,
+            input,
+            input_flags,
+            bind_group,
+            input_scratch: Vec::new(),
+            flags_scratch: vec![0; copies],
+            warmup: WarmupFiller::new(config.warmup, action_low, action_high, seed),
+        })
+    }
+
+    pub fn layout(&self) -> DelayLayout {
+        self.layout
+    }
+
+    /// Name, type and backend of the adapter in use.
+    pub fn adapter_name(&self) -> &str {
+        &self.adapter_name
+    }
+
+    fn dispatch(&self, pipeline: &wgpu::ComputePipeline) {
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("delay step"),
+            });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups((self.layout.copies as u32).div_ceil(WORKGROUP), 1, 1);
+        }
+        self.queue.submit([encoder.finish()]);
+    }
+
+    /// Starts every copy's first episode from `observations` (`[N, obs_dim]`).
+    pub fn reset(&mut self, observations: &[f32]) -> Result<(), GpuError> {
+        let l = self.layout;
+        check_len(
+            "initial observations",
+            observations.len(),
+            l.copies * l.obs_dim,
+        )?;
+        self.queue
+            .write_buffer(&self.input, 0, bytemuck::cast_slice(observations));
+        self.dispatch(&self.reset_pipeline);
+        Ok(())
+    }
+
+    /// Uploads one step of the undelayed batch and runs the step kernel (no readback).
+    pub fn step(&mut self, step: &StepInput<'_>) -> Result<(), GpuError> {
+        let l = self.layout;
+        step.check(&l)?;
+        let (obs, act) = (l.obs_dim, l.act_dim);
+        self.input_scratch.clear();
+        let mut resets = 0u32;
+        for i in 0..l.copies {
+            let done = step.terminated[i] != 0 || step.truncated[i] != 0;
+            let next = if done {
+                &step.final_observations
+            } else {
+                &step.observations
+            };
+            self.input_scratch
+                .extend_from_slice(&step.actions[i * act..(i + 1) * act]);
+            self.input_scratch.push(step.rewards[i]);
+            self.input_scratch
+                .extend_from_slice(&next[i * obs..(i + 1) * obs]);
+            self.flags_scratch[i] =
+                step.terminated[i] | (step.truncated[i] << 1) | if done { resets << 3 } else { 0 };
+            resets += u32::from(done);
+        }
+        for i in (0..l.copies).filter(|&i| step.terminated[i] != 0 || step.truncated[i] != 0) {
+            self.input_scratch
+                .extend_from_slice(&step.observations[i * obs..(i + 1) * obs]);
+        }
+        self.queue
+            .write_buffer(&self.input, 0, bytemuck::cast_slice(&self.input_scratch));
+        self.queue.write_buffer(
+            &self.input_flags,
+            0,
+            bytemuck::cast_slice(&self.flags_scratch),
+        );
+        self.dispatch(&self.step_pipeline);
+        Ok(())
+    }
+
+    /// Copies a device buffer back to the host.
+    fn read<T: Pod>(&self, buffer: &wgpu::Buffer, count: usize) -> Result<Vec<T>, GpuError> {
+        let bytes = (count * size_of::<T>()) as u64;
+        if bytes == 0 {
+            return Ok(Vec::new());
+        }
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
+        self.queue.submit([encoder.finish()]);
+        let (sender, receiver) = std::sync::mpsc::channel();
+        staging
+            .slice(..)
+            .map_async(wgpu::MapMode::Read, move |result| {
+                let _ = sender.send(result);
+            });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        receiver
+            .recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let values = {
+            let view = staging
+                .slice(..)
+                .get_mapped_range()
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            bytemuck::cast_slice(&view).to_vec()
+        };
+        staging.unmap();
+        Ok(values)
+    }
+
+    /// `[N, obs + Δ·act]`: `x_t` of every copy, read back from the device.
+    pub fn read_augmented(&self) -> Result<Vec<f32>, GpuError> {
+        self.read(
+            &self.augmented,
+            self.layout.copies * self.layout.augmented_dim(),
+        )
+    }
+
+    /// Per-copy counters (readiness, step, episode, records of the last step).
+    pub fn read_counters(&self) -> Result<Vec<CopyCounters>, GpuError> {
+        self.read(&self.counters, self.layout.copies)
+    }
+
+    /// The step records completed by the last step, read back from the device.
+    pub fn read_records(&self) -> Result<RecordBatch, GpuError> {
+        let l = self.layout;
+        let mut records = RecordBatch::new(l);
+        records.set_counts(&self.read_counters()?);
+        records.meta = self.read(&self.record_meta, l.copies * l.record_slots())?;
+        records.data = self.read(&self.record_data, l.copies * l.record_slots() * l.stride())?;
+        Ok(records)
+    }
+
+    /// Like [`super::CpuDelayLayer::fill_warmup`], reading the readiness flags back.
+    pub fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), GpuError> {
+        check_len(
+            "actions",
+            actions.len(),
+            self.layout.copies * self.layout.act_dim,
+        )?;
+        let counters = self.read_counters()?;
+        self.warmup
+            .fill(actions, counters.iter().map(|c| c.ready != 0));
+        Ok(())
+    }
+}

@@ -1,0 +1,71 @@
+//! Sizes and buffer layout shared by the CPU and GPU implementations.
+use bytemuck::{Pod, Zeroable};
+
+/// Flag: the step of this record ended the MDP (`terminated_{τ+1}`; no bootstrapping).
+pub const RECORD_TERMINATED: u32 = 1;
+/// Flag: the step of this record hit the time limit (bootstrap from `s_{τ+1}`).
+pub const RECORD_TRUNCATED: u32 = 2;
+/// Flag: this record only carries the last state `s_T` of a finished episode (no action).
+pub const RECORD_FINAL_STATE: u32 = 4;
+
+/// Which step a record belongs to. Identical bytes on the CPU and in WGSL.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
+pub struct RecordMeta {
+    /// Step index within the episode.
+    pub tau: u32,
+    /// Episode counter of the copy.
+    pub episode: u32,
+    /// `RECORD_*` bits.
+    pub flags: u32,
+    /// Ring slot of the copy that held this step when the record was written.
+    pub slot: u32,
+}
+
+/// Per-copy counters. Identical bytes on the CPU and in WGSL.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
+pub struct CopyCounters {
+    /// Index within the episode of the newest state.
+    pub t: u32,
+    pub episode: u32,
+    /// Ring slot of the newest state (advances by one per step, across episodes).
+    pub cursor: u32,
+    /// 1 when `x_t` exists (`t ≥ Δ`), so the policy acts; 0 during warm-up.
+    pub ready: u32,
+    /// Records completed by the last step.
+    pub record_count: u32,
+    pub _pad: [u32; 3],
+}
+
+/// The shapes of one delay layer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DelayLayout {
+    pub copies: usize,
+    pub obs_dim: usize,
+    pub act_dim: usize,
+    /// Total delay Δ.
+    pub delay: usize,
+}
+
+impl DelayLayout {
+    /// `obs_dim + Δ·act_dim`.
+    pub fn augmented_dim(&self) -> usize {
+        self.obs_dim + self.delay * self.act_dim
+    }
+    /// Steps kept per copy: transition τ completes at τ + 1 + Δ and needs `s_{τ-Δ}`; an episode
+    /// end flushes τ down to T − Δ − 1, so `s_{T-2Δ-1} … s_T` (2Δ + 2 states) must survive the
+    /// step that also writes the next episode's `s_0`: 2Δ + 3 slots.
+    pub fn ring_len(&self) -> usize {
+        2 * self.delay + 3
+    }
+    /// Floats per ring slot and per record: state, action, reward.
+    pub fn stride(&self) -> usize {
+        self.obs_dim + self.act_dim + 1
+    }
+    /// At most Δ + 1 step records plus the final-state record complete in one step (at an
+    /// episode end); one otherwise.
+    pub fn record_slots(&self) -> usize {
+        self.delay + 2
+    }
+}

@@ -1,0 +1,25 @@
+//! The delay layer (SPEC §1): turns a batch of undelayed simulations into what a delayed agent
+//! sees — augmented states `x_t = (s_{t-Δ}, a_{t-Δ}, …, a_{t-1})` — and what the learners train
+//! on — time-aligned step records, from which every transition
+//! `(x_τ, s_τ, a_τ, r_τ, x_{τ+1}, s_{τ+1}, terminated_{τ+1})` is rebuilt.
+//!
+//! [`CpuDelayLayer`] is the reference and the fallback; [`GpuDelayLayer`] keeps the same ring
+//! buffers on a `wgpu` device and updates them with `shaders/delay.wgsl`, producing identical
+//! outputs. [`ReplayStore`] keeps records at O(obs + act) floats per step.
+
+mod config;
+mod cpu;
+mod gpu;
+mod layout;
+mod records;
+mod replay;
+mod warmup;
+
+pub use config::{DelayConfig, DelayError, MAX_DELAY, WarmupActions, arrival_delay};
+pub use cpu::{CpuDelayLayer, Transitions};
+pub use gpu::{GpuDelayLayer, GpuError};
+pub use layout::{
+    CopyCounters, DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED, RecordMeta,
+};
+pub use records::{RecordBatch, RecordRef, StepInput};
+pub use replay::{DEFAULT_CAPACITY, ReplayError, ReplayStore};

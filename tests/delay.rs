@@ -1,0 +1,634 @@
+//! The delay layer against its contract (SPEC §1), on the CPU reference and on the GPU.
+use std::collections::BTreeMap;
+
+use dhrl::delay::{
+    CpuDelayLayer, DelayConfig, DelayError, GpuDelayLayer, MAX_DELAY, RecordBatch, ReplayStore,
+    StepInput, Transitions, WarmupActions, arrival_delay,
+};
+use dhrl::sim::{BatchConfig, BatchedEnv};
+use dhrl::tasks::TaskName;
+use proptest::prelude::*;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// A synthetic undelayed batch: states are `[copy, episode, step, k]`-coded numbers so any
+/// mix-up shows; episode lengths and ends (terminated or truncated) come from a seeded RNG.
+struct FakeBatch {
+    obs_dim: usize,
+    act_dim: usize,
+    episode_len: Vec<u32>,
+    episode: Vec<u32>,
+    t: Vec<u32>,
+    rng: ChaCha8Rng,
+    max_len: u32,
+}
+
+/// The true process of one copy, logged undelayed: per episode, the states, actions, rewards
+/// and how it ended.
+#[derive(Default, Clone, Debug)]
+struct Episode {
+    states: Vec<Vec<f32>>,
+    actions: Vec<Vec<f32>>,
+    rewards: Vec<f32>,
+    terminated: bool,
+    truncated: bool,
+}
+
+impl FakeBatch {
+    fn new(copies: usize, obs_dim: usize, act_dim: usize, max_len: u32, seed: u64) -> FakeBatch {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let episode_len = (0..copies).map(|_| rng.random_range(1..=max_len)).collect();
+        FakeBatch {
+            obs_dim,
+            act_dim,
+            episode_len,
+            episode: vec![0; copies],
+            t: vec![0; copies],
+            rng,
+            max_len,
+        }
+    }
+
+    fn state(&self, copy: usize, episode: u32, t: u32) -> Vec<f32> {
+        (0..self.obs_dim)
+            .map(|k| (copy * 1_000_000 + episode as usize * 10_000 + t as usize * 10 + k) as f32)
+            .collect()
+    }
+
+    fn initial(&self) -> Vec<f32> {
+        (0..self.episode.len())
+            .flat_map(|c| self.state(c, 0, 0))
+            .collect()
+    }
+
+    /// The undelayed log, one list of episodes per copy, each starting with its `s_0`.
+    fn new_log(&self) -> Vec<Vec<Episode>> {
+        (0..self.episode.len())
+            .map(|c| {
+                vec![Episode {
+                    states: vec![self.state(c, 0, 0)],
+                    ..Episode::default()
+                }]
+            })
+            .collect()
+    }
+
+    /// Steps every copy with `actions`; returns the StepInput arrays and logs into `log`.
+    fn step(
+        &mut self,
+        actions: &[f32],
+        log: &mut [Vec<Episode>],
+    ) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<u32>, Vec<u32>) {
+        let n = self.episode.len();
+        let (mut obs, mut fin, mut rew, mut term, mut trunc) =
+            (vec![], vec![], vec![], vec![0; n], vec![0; n]);
+        for c in 0..n {
+            let (e, t) = (self.episode[c], self.t[c]);
+            let ep = &mut log[c][e as usize];
+            ep.actions
+                .push(actions[c * self.act_dim..(c + 1) * self.act_dim].to_vec());
+            let r = (c * 100 + e as usize * 10) as f32 + t as f32 * 0.5;
+            ep.rewards.push(r);
+            rew.push(r);
+            let next = self.state(c, e, t + 1);
+            ep.states.push(next.clone());
+            if t + 1 == self.episode_len[c] {
+                let terminated = self.rng.random_bool(0.5);
+                (ep.terminated, ep.truncated) = (terminated, !terminated);
+                term[c] = u32::from(terminated);
+                trunc[c] = u32::from(!terminated);
+                fin.extend_from_slice(&next);
+                self.episode[c] += 1;
+                self.t[c] = 0;
+                self.episode_len[c] = self.rng.random_range(1..=self.max_len);
+                log[c].push(Episode {
+                    states: vec![self.state(c, e + 1, 0)],
+                    ..Episode::default()
+                });
+                obs.extend(self.state(c, e + 1, 0));
+            } else {
+                self.t[c] = t + 1;
+                fin.extend(std::iter::repeat_n(-1.0, self.obs_dim));
+                obs.extend(next);
+            }
+        }
+        (obs, fin, rew, term, trunc)
+    }
+}
+
+const LOW: [f64; 2] = [-1.0, -2.0];
+const HIGH: [f64; 2] = [1.0, 2.0];
+
+fn cpu_layer(delay: usize, copies: usize, obs_dim: usize) -> CpuDelayLayer {
+    CpuDelayLayer::new(&DelayConfig::fixed(delay), copies, obs_dim, &LOW, &HIGH, 7).unwrap()
+}
+
+/// `x_t` as the contract defines it, from the undelayed log.
+fn expected_augmented(ep: &Episode, t: usize, delay: usize) -> Vec<f32> {
+    let mut x = ep.states[t - delay].clone();
+    for a in &ep.actions[t - delay..t] {
+        x.extend_from_slice(a);
+    }
+    x
+}
+
+/// Every transition `(x_τ, s_τ, a_τ, r_τ, x_{τ+1}, s_{τ+1}, terminated)` of a finished episode,
+/// τ from Δ (the first with an augmented state) to T − 1, from the undelayed log.
+fn expected_transitions(
+    ep: &Episode,
+    delay: usize,
+) -> Vec<(
+    u32,
+    Vec<f32>,
+    Vec<f32>,
+    Vec<f32>,
+    f32,
+    Vec<f32>,
+    Vec<f32>,
+    u32,
+)> {
+    let len = ep.actions.len();
+    (delay..len)
+        .map(|tau| {
+            let last = tau + 1 == len;
+            (
+                tau as u32,
+                expected_augmented(ep, tau, delay),
+                ep.states[tau].clone(),
+                ep.actions[tau].clone(),
+                ep.rewards[tau],
+                expected_augmented(ep, tau + 1, delay),
+                ep.states[tau + 1].clone(),
+                u32::from(last && ep.terminated),
+            )
+        })
+        .collect()
+}
+
+type Keyed =
+    BTreeMap<(usize, u32, u32), (Vec<f32>, Vec<f32>, Vec<f32>, f32, Vec<f32>, Vec<f32>, u32)>;
+
+fn key_transitions(tr: &Transitions, layout_aug: usize, obs: usize, act: usize, into: &mut Keyed) {
+    for i in 0..tr.len() {
+        let previous = into.insert(
+            (tr.copy[i], tr.episode[i], tr.tau[i]),
+            (
+                tr.augmented[i * layout_aug..(i + 1) * layout_aug].to_vec(),
+                tr.state[i * obs..(i + 1) * obs].to_vec(),
+                tr.action[i * act..(i + 1) * act].to_vec(),
+                tr.reward[i],
+                tr.next_augmented[i * layout_aug..(i + 1) * layout_aug].to_vec(),
+                tr.next_state[i * obs..(i + 1) * obs].to_vec(),
+                tr.terminated[i],
+            ),
+        );
+        assert!(
+            previous.is_none(),
+            "transition {:?} emitted twice",
+            (tr.copy[i], tr.episode[i], tr.tau[i])
+        );
+    }
+}
+
+/// Runs the CPU layer over a fake batch, checking `x_t` every step; returns the emitted
+/// transitions keyed by (copy, episode, τ), the undelayed log and the replay store.
+fn run_cpu(
+    delay: usize,
+    copies: usize,
+    max_len: u32,
+    steps: usize,
+    seed: u64,
+) -> (Keyed, Vec<Vec<Episode>>, ReplayStore, usize) {
+    let (obs_dim, act_dim) = (3, 2);
+    let mut fake = FakeBatch::new(copies, obs_dim, act_dim, max_len, seed);
+    let mut layer = cpu_layer(delay, copies, obs_dim);
+    let layout = layer.layout();
+    // Room for every record: at most one step and one final state per copy and step.
+    let mut replay = ReplayStore::new(layout, copies * (2 * steps + 2 * delay + 8)).unwrap();
+    layer.reset(&fake.initial()).unwrap();
+    let mut log = fake.new_log();
+    let mut emitted = Keyed::new();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 99);
+    let aug = layout.augmented_dim();
+    for _ in 0..steps {
+        let mut actions: Vec<f32> = (0..copies * act_dim)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        layer.fill_warmup(&mut actions).unwrap();
+        let (obs, fin, rew, term, trunc) = fake.step(&actions, &mut log);
+        let input = StepInput {
+            actions: &actions,
+            observations: &obs,
+            final_observations: &fin,
+            rewards: &rew,
+            terminated: &term,
+            truncated: &trunc,
+        };
+        layer.step(&input).unwrap();
+        replay.push(layer.records()).unwrap();
+        key_transitions(&layer.transitions(), aug, obs_dim, act_dim, &mut emitted);
+        for c in 0..copies {
+            let ep = log[c].last().unwrap();
+            let t = fake.t[c] as usize;
+            let ready = layer.ready()[c] == 1;
+            assert_eq!(ready, t >= delay, "copy {c} t {t}");
+            let x = &layer.augmented()[c * aug..(c + 1) * aug];
+            if ready {
+                assert_eq!(
+                    x,
+                    expected_augmented(ep, t, delay).as_slice(),
+                    "x_t of copy {c} at t {t}"
+                );
+            } else {
+                assert!(x.iter().all(|&v| v == 0.0));
+            }
+        }
+    }
+    (emitted, log, replay, aug)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// (a) x_t = (s_{t-Δ}, a_{t-Δ..t-1}); every transition of every finished episode appears
+    /// exactly once with the right flags; nothing of an unfinished episode appears early.
+    #[test]
+    fn augmented_states_and_transitions_follow_the_undelayed_log(
+        delay in 0usize..7, copies in 1usize..5, max_len in 1u32..20, seed in 0u64..1000,
+    ) {
+        let (emitted, log, _, _) = run_cpu(delay, copies, max_len, 60, seed);
+        let mut expected = 0;
+        for (c, episodes) in log.iter().enumerate() {
+            for (e, ep) in episodes.iter().enumerate() {
+                if !(ep.terminated || ep.truncated) {
+                    continue; // unfinished: only transitions whose s_{τ+1} arrived may be out
+                }
+                for tr in expected_transitions(ep, delay) {
+                    expected += 1;
+                    let got = emitted.get(&(c, e as u32, tr.0)).unwrap_or_else(|| panic!("missing transition {:?}", (c, e, tr.0)));
+                    prop_assert_eq!(got, &(tr.1, tr.2, tr.3, tr.4, tr.5, tr.6, tr.7));
+                }
+            }
+        }
+        // The rest come from unfinished episodes, only once s_{τ+1} arrived: τ ≤ t − Δ − 1.
+        for (&(c, e, tau), _) in &emitted {
+            let ep = &log[c][e as usize];
+            if !(ep.terminated || ep.truncated) {
+                prop_assert!((tau as usize) + 1 + delay <= ep.actions.len(), "early transition {:?}", (c, e, tau));
+            }
+        }
+        prop_assert!(emitted.len() >= expected);
+    }
+
+    /// (d) The replay store rebuilds exactly the transitions the layer wrote out verbatim.
+    /// A transition of a running episode becomes sampleable one step after it completed (its
+    /// `s_{τ+1}` is stored with record τ + 1), so only each running episode's newest
+    /// transition may be missing.
+    #[test]
+    fn replay_reconstruction_equals_the_verbatim_transitions(
+        delay in 0usize..7, copies in 1usize..4, max_len in 1u32..20, seed in 0u64..1000,
+    ) {
+        let (emitted, log, replay, aug) = run_cpu(delay, copies, max_len, 50, seed);
+        let mut rebuilt = Keyed::new();
+        key_transitions(&replay.all(), aug, 3, 2, &mut rebuilt);
+        for (key, value) in &rebuilt {
+            prop_assert_eq!(emitted.get(key), Some(value));
+        }
+        for (&(c, e, tau), _) in emitted.iter().filter(|(k, _)| !rebuilt.contains_key(k)) {
+            let running = e as usize + 1 == log[c].len();
+            let newest = emitted.range((c, e, tau + 1)..(c, e + 1, 0)).next().is_none();
+            prop_assert!(running && newest, "transition {:?} missing from the replay", (c, e, tau));
+        }
+        if !emitted.is_empty() {
+            let batch = replay.sample(64, &mut ChaCha8Rng::seed_from_u64(seed)).unwrap();
+            let mut sampled = Keyed::new();
+            for i in 0..batch.len() {
+                let one = Transitions {
+                    copy: vec![batch.copy[i]], episode: vec![batch.episode[i]], tau: vec![batch.tau[i]],
+                    augmented: batch.augmented[i * aug..(i + 1) * aug].to_vec(), state: batch.state[i * 3..(i + 1) * 3].to_vec(),
+                    action: batch.action[i * 2..(i + 1) * 2].to_vec(), reward: vec![batch.reward[i]],
+                    next_augmented: batch.next_augmented[i * aug..(i + 1) * aug].to_vec(),
+                    next_state: batch.next_state[i * 3..(i + 1) * 3].to_vec(), terminated: vec![batch.terminated[i]],
+                };
+                sampled.clear();
+                key_transitions(&one, aug, 3, 2, &mut sampled);
+                let (k, v) = sampled.iter().next().unwrap();
+                prop_assert_eq!(emitted.get(k), Some(v));
+            }
+        }
+    }
+}
+
+#[test]
+fn zero_delay_is_the_undelayed_task() {
+    let (emitted, log, _, _) = run_cpu(0, 2, 6, 30, 3);
+    for (c, episodes) in log.iter().enumerate() {
+        for (e, ep) in episodes
+            .iter()
+            .enumerate()
+            .filter(|(_, ep)| ep.terminated || ep.truncated)
+        {
+            for (tau, a) in ep.actions.iter().enumerate() {
+                let got = &emitted[&(c, e as u32, tau as u32)];
+                assert_eq!(got.0, ep.states[tau], "x_t = s_t");
+                assert_eq!(&got.2, a);
+                assert_eq!(got.5, ep.states[tau + 1]);
+            }
+        }
+    }
+}
+
+#[test]
+fn replay_reports_its_memory_per_step() {
+    let layout = cpu_layer(20, 1, 376).layout();
+    let layout = dhrl::delay::DelayLayout {
+        act_dim: 17,
+        ..layout
+    };
+    let replay = ReplayStore::new(layout, 1000).unwrap();
+    assert_eq!(replay.bytes_per_step(), (376 + 17 + 1) * 4 + 12);
+    assert_eq!(
+        replay.verbatim_bytes_per_step(),
+        (2 * (376 + 20 * 17) + 2 * 376 + 17 + 2) * 4
+    );
+    assert!(matches!(
+        ReplayStore::new(layout, 10),
+        Err(dhrl::delay::ReplayError::TooSmall { .. })
+    ));
+}
+
+#[test]
+fn warmup_actions_are_random_in_bounds_or_zeros() {
+    let mut layer = cpu_layer(3, 4, 2);
+    layer.reset(&[0.0; 8]).unwrap();
+    let mut actions = vec![9.0; 8];
+    layer.fill_warmup(&mut actions).unwrap();
+    for row in actions.chunks(2) {
+        assert!(
+            (-1.0..=1.0).contains(&row[0]) && (-2.0..=2.0).contains(&row[1]),
+            "{row:?}"
+        );
+    }
+    assert!(actions.iter().any(|&a| a != 0.0));
+    let config = DelayConfig {
+        warmup: WarmupActions::Zeros,
+        ..DelayConfig::fixed(3)
+    };
+    let mut zeros = CpuDelayLayer::new(&config, 4, 2, &LOW, &HIGH, 1).unwrap();
+    zeros.reset(&[0.0; 8]).unwrap();
+    zeros.fill_warmup(&mut actions).unwrap();
+    assert!(actions.iter().all(|&a| a == 0.0));
+}
+
+#[test]
+fn invalid_delay_configurations_are_clear_errors() {
+    let random = DelayConfig {
+        random_delay: true,
+        ..DelayConfig::default()
+    };
+    assert_eq!(
+        random.total_delay(),
+        Err(DelayError::RandomDelayWithoutBound)
+    );
+    assert!(
+        random
+            .total_delay()
+            .unwrap_err()
+            .to_string()
+            .contains("--max-delay")
+    );
+    let bound_only = DelayConfig {
+        max_random_delay: Some(3),
+        ..DelayConfig::default()
+    };
+    assert_eq!(
+        bound_only.total_delay(),
+        Err(DelayError::BoundWithoutRandomDelay(3))
+    );
+    let both = DelayConfig {
+        observation_delay: 2,
+        random_delay: true,
+        max_random_delay: Some(3),
+        ..DelayConfig::default()
+    };
+    assert_eq!(
+        both.total_delay(),
+        Err(DelayError::FixedAndRandomObservationDelay(2))
+    );
+    let too_long = DelayConfig {
+        observation_delay: MAX_DELAY,
+        action_delay: 1,
+        ..DelayConfig::default()
+    };
+    assert_eq!(
+        too_long.total_delay(),
+        Err(DelayError::TooLong {
+            total: MAX_DELAY + 1
+        })
+    );
+    let noise = DelayConfig {
+        actuator_noise: -0.1,
+        ..DelayConfig::default()
+    };
+    assert_eq!(noise.total_delay(), Err(DelayError::BadNoise(-0.1)));
+    let split = DelayConfig {
+        observation_delay: 3,
+        action_delay: 2,
+        ..DelayConfig::default()
+    };
+    assert_eq!(
+        split.total_delay(),
+        Ok(5),
+        "only the total delay matters to the agent"
+    );
+    let conservative = DelayConfig {
+        random_delay: true,
+        max_random_delay: Some(4),
+        action_delay: 1,
+        ..DelayConfig::default()
+    };
+    assert_eq!(conservative.total_delay(), Ok(5));
+}
+
+/// (c) Under random delays the conservative agent acts on exactly Δ_max-old observations, while
+/// observations really do arrive out of order.
+#[test]
+fn conservative_agent_sees_exactly_max_delay_old_observations() {
+    let bound = 5;
+    let config = DelayConfig {
+        random_delay: true,
+        max_random_delay: Some(bound),
+        ..DelayConfig::default()
+    };
+    let mut random = CpuDelayLayer::new(&config, 3, 3, &LOW, &HIGH, 2).unwrap();
+    let mut fixed = cpu_layer(bound, 3, 3);
+    let mut fake = FakeBatch::new(3, 3, 2, 40, 5);
+    let mut log = fake.new_log();
+    random.reset(&fake.initial()).unwrap();
+    fixed.reset(&fake.initial()).unwrap();
+    let mut out_of_order = 0;
+    for step in 0..80u32 {
+        let actions = vec![0.25; 6];
+        let (obs, fin, rew, term, trunc) = fake.step(&actions, &mut log);
+        let input = StepInput {
+            actions: &actions,
+            observations: &obs,
+            final_observations: &fin,
+            rewards: &rew,
+            terminated: &term,
+            truncated: &trunc,
+        };
+        random.step(&input).unwrap();
+        fixed.step(&input).unwrap();
+        assert_eq!(random.augmented(), fixed.augmented(), "step {step}");
+        assert_eq!(random.ready(), fixed.ready());
+        for c in 0..3 {
+            let (e, t) = (fake.episode[c], fake.t[c]);
+            // What has arrived by now; the agent's state Δ_max back always has.
+            let arrived = |tau: u32| tau + arrival_delay(2, c as u32, e, tau, bound) as u32 <= t;
+            if t as usize >= bound {
+                assert!(arrived(t - bound as u32));
+            }
+            out_of_order += (1..t)
+                .filter(|&tau| arrived(tau) && !arrived(tau - 1))
+                .count();
+        }
+    }
+    assert!(
+        out_of_order > 0,
+        "random delays never reordered observations"
+    );
+}
+
+/// Records of two layers as comparable lists.
+fn record_list(records: &RecordBatch) -> Vec<(usize, [u32; 4], Vec<f32>)> {
+    records
+        .iter()
+        .map(|r| {
+            let m = r.meta;
+            let mut data = r.state.to_vec();
+            data.extend_from_slice(r.action);
+            data.push(r.reward);
+            (r.copy, [m.tau, m.episode, m.flags, m.slot], data)
+        })
+        .collect()
+}
+
+fn gpu_layer(
+    config: &DelayConfig,
+    copies: usize,
+    obs_dim: usize,
+    low: &[f64],
+    high: &[f64],
+) -> Option<GpuDelayLayer> {
+    match GpuDelayLayer::new(config, copies, obs_dim, low, high, 7) {
+        Ok(layer) => Some(layer),
+        Err(e) if std::env::var_os("DHRL_REQUIRE_GPU").is_some() => {
+            panic!("DHRL_REQUIRE_GPU is set: {e}")
+        }
+        Err(e) => {
+            eprintln!("skipping the GPU comparison: {e}");
+            None
+        }
+    }
+}
+
+/// (b) The WGSL kernels produce the same augmented states and records as the CPU reference,
+/// across episode boundaries, with copies finishing at different times.
+#[test]
+fn gpu_matches_cpu_on_synthetic_episodes() {
+    for delay in [0, 1, 4, 9] {
+        let copies = 37;
+        let config = DelayConfig::fixed(delay);
+        let Some(mut gpu) = gpu_layer(&config, copies, 3, &LOW, &HIGH) else {
+            return;
+        };
+        let mut cpu = cpu_layer(delay, copies, 3);
+        let mut fake = FakeBatch::new(copies, 3, 2, 15, delay as u64);
+        let mut log = fake.new_log();
+        cpu.reset(&fake.initial()).unwrap();
+        gpu.reset(&fake.initial()).unwrap();
+        assert_eq!(gpu.read_augmented().unwrap(), cpu.augmented());
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        for step in 0..70 {
+            let actions: Vec<f32> = (0..copies * 2)
+                .map(|_| rng.random_range(-1.0..1.0))
+                .collect();
+            let (obs, fin, rew, term, trunc) = fake.step(&actions, &mut log);
+            let input = StepInput {
+                actions: &actions,
+                observations: &obs,
+                final_observations: &fin,
+                rewards: &rew,
+                terminated: &term,
+                truncated: &trunc,
+            };
+            cpu.step(&input).unwrap();
+            gpu.step(&input).unwrap();
+            assert_eq!(
+                gpu.read_augmented().unwrap(),
+                cpu.augmented(),
+                "Δ {delay} step {step}"
+            );
+            assert_eq!(
+                gpu.read_counters().unwrap(),
+                cpu.counters(),
+                "Δ {delay} step {step}"
+            );
+            assert_eq!(
+                record_list(&gpu.read_records().unwrap()),
+                record_list(cpu.records()),
+                "Δ {delay} step {step}"
+            );
+        }
+    }
+}
+
+/// (b) on real physics: a batch of Hopper copies (which fall at different times) through both.
+#[test]
+fn gpu_matches_cpu_on_hopper() {
+    let (copies, delay) = (24, 6);
+    let mut env = BatchedEnv::new(&BatchConfig {
+        task: TaskName::Hopper,
+        envs: copies,
+        threads: 2,
+        seed: 3,
+        actuator_noise: 0.0,
+    })
+    .unwrap();
+    let (low, high) = env.action_bounds();
+    let (low, high) = (low.to_vec(), high.to_vec());
+    let config = DelayConfig::fixed(delay);
+    let Some(mut gpu) = gpu_layer(&config, copies, env.obs_dim(), &low, &high) else {
+        return;
+    };
+    let mut cpu = CpuDelayLayer::new(&config, copies, env.obs_dim(), &low, &high, 7).unwrap();
+    cpu.reset(env.observations()).unwrap();
+    gpu.reset(env.observations()).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let mut finished = 0;
+    for step in 0..150 {
+        let actions: Vec<f32> = (0..copies * env.act_dim())
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        env.step(&actions).unwrap();
+        finished += env.terminated().iter().filter(|&&t| t == 1).count();
+        let input = StepInput::from_env(&env, &actions);
+        cpu.step(&input).unwrap();
+        gpu.step(&input).unwrap();
+        assert_eq!(
+            gpu.read_augmented().unwrap(),
+            cpu.augmented(),
+            "step {step}"
+        );
+        assert_eq!(
+            record_list(&gpu.read_records().unwrap()),
+            record_list(cpu.records()),
+            "step {step}"
+        );
+    }
+    assert!(
+        finished > copies,
+        "episodes should end at different times: {finished}"
+    );
+}
