@@ -127,3 +127,98 @@ pub fn bench_env(
         episodes_finished,
     })
 }
+
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error(transparent)]
+    Delay(#[from] crate::delay::DelayError),
+    #[error(transparent)]
+    Gpu(#[from] crate::delay::GpuError),
+}
+
+/// One row of `dhrl bench delay`.
+#[derive(Debug, Clone, Serialize)]
+pub struct DelayBenchRow {
+    pub task: TaskName,
+    pub envs: usize,
+    pub delay: usize,
+    /// Batched simulator steps per second (copies × steps / s), delay layer excluded.
+    pub sim_env_steps_per_sec: f64,
+    /// Delay-layer-only throughput on the CPU, in environment steps per second.
+    pub cpu_env_steps_per_sec: f64,
+    /// The CPU delay layer's time as a share of a full batched simulation step.
+    pub cpu_share_of_sim_step: f64,
+    /// Same on the GPU (upload, kernel, completion; no readback), when an adapter exists.
+    pub gpu_env_steps_per_sec: Option<f64>,
+    pub gpu_share_of_sim_step: Option<f64>,
+    pub gpu_adapter: Option<String>,
+}
+
+/// Times the delay layer alone, on the CPU and (when an adapter exists) on the GPU, fed with
+/// the outputs of a real batched simulation, beside the simulation step itself.
+pub fn bench_delay(
+    task: TaskName,
+    envs: usize,
+    delays: &[usize],
+    threads: usize,
+    steps: usize,
+    seed: u64,
+) -> Result<Vec<DelayBenchRow>, BenchError> {
+    use crate::delay::{CpuDelayLayer, DelayConfig, GpuDelayLayer, StepInput};
+    let mut batch = BatchedEnv::new(&BatchConfig { task, envs, threads, seed, actuator_noise: 0.0 })?;
+    let (low, high) = (batch.action_bounds().0.to_vec(), batch.action_bounds().1.to_vec());
+    let actions = ActionTable::uniform(&low, &high, envs, 16, seed);
+    let obs_dim = batch.obs_dim();
+    let mut cpu = Vec::new();
+    let mut gpu = Vec::new();
+    for &delay in delays {
+        let config = DelayConfig::fixed(delay);
+        let mut layer = CpuDelayLayer::new(&config, envs, obs_dim, &low, &high, seed)?;
+        layer.reset(batch.observations())?;
+        cpu.push(layer);
+        // No adapter is not an error here: the GPU columns stay empty.
+        if let Ok(mut layer) = GpuDelayLayer::new(&config, envs, obs_dim, &low, &high, seed) {
+            layer.reset(batch.observations())?;
+            gpu.push(layer);
+        }
+    }
+    let (mut sim_time, mut cpu_time, mut gpu_time) = (0.0, vec![0.0; delays.len()], vec![0.0; delays.len()]);
+    // Run the pools once before timing.
+    batch.step(actions.row(0))?;
+    for step in 0..steps {
+        let row = actions.row(step + 1);
+        let start = Instant::now();
+        batch.step(row)?;
+        sim_time += start.elapsed().as_secs_f64();
+        let input = StepInput::from_env(&batch, row);
+        for (i, layer) in cpu.iter_mut().enumerate() {
+            let start = Instant::now();
+            layer.step(&input)?;
+            cpu_time[i] += start.elapsed().as_secs_f64();
+        }
+        for (i, layer) in gpu.iter_mut().enumerate() {
+            let start = Instant::now();
+            layer.step(&input)?;
+            layer.wait()?;
+            gpu_time[i] += start.elapsed().as_secs_f64();
+        }
+    }
+    let env_steps = (envs * steps) as f64;
+    Ok(delays
+        .iter()
+        .enumerate()
+        .map(|(i, &delay)| DelayBenchRow {
+            task,
+            envs,
+            delay,
+            sim_env_steps_per_sec: env_steps / sim_time,
+            cpu_env_steps_per_sec: env_steps / cpu_time[i],
+            cpu_share_of_sim_step: cpu_time[i] / sim_time,
+            gpu_env_steps_per_sec: gpu.get(i).map(|_| env_steps / gpu_time[i]),
+            gpu_share_of_sim_step: gpu.get(i).map(|_| gpu_time[i] / sim_time),
+            gpu_adapter: gpu.get(i).map(|layer| layer.adapter_name().to_string()),
+        })
+        .collect())
+}

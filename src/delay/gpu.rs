@@ -340,6 +340,11 @@ impl GpuDelayLayer {
         Ok(())
     }
 
+    /// Blocks until the device has finished every submitted step.
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Readback(e.to_string()))
+    }
+
     /// Copies a device buffer back to the host.
     fn read<T: Pod>(&self, buffer: &wgpu::Buffer, count: usize) -> Result<Vec<T>, GpuError> {
         let bytes = (count * size_of::<T>()) as u64;

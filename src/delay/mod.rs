@@ -7,6 +7,7 @@
 //! buffers on a `wgpu` device and updates them with `shaders/delay.wgsl`, producing identical
 //! outputs. [`ReplayStore`] keeps records at O(obs + act) floats per step.
 
+mod args;
 mod config;
 mod cpu;
 mod gpu;
@@ -15,6 +16,7 @@ mod records;
 mod replay;
 mod warmup;
 
+pub use args::{DelayArgs, NegativeDelay};
 pub use config::{DelayConfig, DelayError, MAX_DELAY, WarmupActions, arrival_delay};
 pub use cpu::{CpuDelayLayer, Transitions};
 pub use gpu::{GpuDelayLayer, GpuError};

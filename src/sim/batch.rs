@@ -24,7 +24,7 @@ pub struct BatchConfig {
 }
 
 /// One copy with its own random stream and scratch space.
-struct Copy {
+struct EnvCopy {
     env: Env,
     rng: ChaCha8Rng,
     executed_action: Vec<f64>,
@@ -49,7 +49,7 @@ struct CopyOutputs<'a> {
 /// `episode_returns` and `episode_lengths` hold what the finished episode ended with.
 pub struct BatchedEnv {
     model: Arc<TaskModel>,
-    copies: Vec<Copy>,
+    copies: Vec<EnvCopy>,
     pool: rayon::ThreadPool,
     actuator_noise: Option<Normal<f64>>,
     observations: Vec<f32>,
@@ -77,16 +77,7 @@ impl BatchedEnv {
                 min: 1.0,
             });
         }
-        let sigma = config.actuator_noise;
-        if !(sigma.is_finite() && sigma >= 0.0) {
-            return Err(SimError::TooSmall {
-                what: "the actuator noise σ (finite)",
-                found: sigma,
-                min: 0.0,
-            });
-        }
-        let actuator_noise =
-            (sigma > 0.0).then(|| Normal::new(0.0, sigma).expect("σ is finite and positive"));
+        let actuator_noise = actuator_noise(config.actuator_noise)?;
         let model = TaskModel::load(config.task)?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(config.threads)
@@ -100,7 +91,7 @@ impl BatchedEnv {
             .map(|i| {
                 let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
                 rng.set_stream(i as u64);
-                Copy {
+                EnvCopy {
                     env: Env::new(model.clone()),
                     rng,
                     executed_action: vec![0.0; model.task.act_dim],
@@ -248,7 +239,7 @@ impl BatchedEnv {
     }
 }
 
-impl Copy {
+impl EnvCopy {
     fn step(
         &mut self,
         model: &TaskModel,
@@ -282,19 +273,28 @@ impl Copy {
 
 /// The action the actuators receive: the chosen one, or `clip(a + N(0, σ²))` under actuator
 /// noise (SPEC §1). Without noise it is passed on unclipped, as Gymnasium does.
-fn executed_action(
-    action: &[f32],
+pub fn executed_action(
+    action: &[impl Copy + Into<f64>],
     noise: Option<Normal<f64>>,
-    rng: &mut ChaCha8Rng,
+    rng: &mut impl rand::Rng,
     model: &TaskModel,
     out: &mut [f64],
 ) {
     for (i, (executed, &a)) in out.iter_mut().zip(action).enumerate() {
         *executed = match noise {
-            Some(n) => (a as f64 + n.sample(rng)).clamp(model.action_low[i], model.action_high[i]),
-            None => a as f64,
+            Some(n) => (a.into() + n.sample(rng)).clamp(model.action_low[i], model.action_high[i]),
+            None => a.into(),
         };
     }
+}
+
+/// The actuator noise distribution for σ (`None` for σ = 0), or an error for a negative or
+/// non-finite σ.
+pub fn actuator_noise(sigma: f64) -> Result<Option<Normal<f64>>, SimError> {
+    if !(sigma.is_finite() && sigma >= 0.0) {
+        return Err(SimError::TooSmall { what: "the actuator noise σ (finite)", found: sigma, min: 0.0 });
+    }
+    Ok((sigma > 0.0).then(|| Normal::new(0.0, sigma).expect("σ is finite and positive")))
 }
 
 fn write_f32(out: &mut [f32], values: &[f64]) {

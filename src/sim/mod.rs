@@ -5,7 +5,7 @@ mod batch;
 mod env;
 mod model;
 
-pub use batch::{BatchConfig, BatchedEnv};
+pub use batch::{actuator_noise, executed_action, BatchConfig, BatchedEnv};
 pub use env::{Env, StepOutcome};
 pub use model::{TaskModel, assets_dir};
 
