@@ -1,6 +1,6 @@
 //! The CPU delay layer alone at HalfCheetah sizes, fed with synthetic steps (a twentieth of
 //! the copies finishing each step), for Δ = 5, 10, 20.
-use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use dhrl::delay::{CpuDelayLayer, DelayConfig, StepInput};
 
 const ENVS: usize = 4096;
@@ -16,7 +16,15 @@ fn delay_layer_step(c: &mut Criterion) {
     let never = vec![0u32; ENVS];
     let some: Vec<u32> = (0..ENVS).map(|i| u32::from(i % 20 == 0)).collect();
     for delay in [5, 10, 20] {
-        let mut layer = CpuDelayLayer::new(&DelayConfig::fixed(delay), ENVS, OBS, &[-1.0; ACT], &[1.0; ACT], 0).unwrap();
+        let mut layer = CpuDelayLayer::new(
+            &DelayConfig::fixed(delay),
+            ENVS,
+            OBS,
+            &[-1.0; ACT],
+            &[1.0; ACT],
+            0,
+        )
+        .unwrap();
         layer.reset(&observations).unwrap();
         let mut step = 0usize;
         group.bench_function(format!("{ENVS} copies, delay {delay}"), |b| {

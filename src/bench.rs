@@ -167,8 +167,17 @@ pub fn bench_delay(
     seed: u64,
 ) -> Result<Vec<DelayBenchRow>, BenchError> {
     use crate::delay::{CpuDelayLayer, DelayConfig, GpuDelayLayer, StepInput};
-    let mut batch = BatchedEnv::new(&BatchConfig { task, envs, threads, seed, actuator_noise: 0.0 })?;
-    let (low, high) = (batch.action_bounds().0.to_vec(), batch.action_bounds().1.to_vec());
+    let mut batch = BatchedEnv::new(&BatchConfig {
+        task,
+        envs,
+        threads,
+        seed,
+        actuator_noise: 0.0,
+    })?;
+    let (low, high) = (
+        batch.action_bounds().0.to_vec(),
+        batch.action_bounds().1.to_vec(),
+    );
     let actions = ActionTable::uniform(&low, &high, envs, 16, seed);
     let obs_dim = batch.obs_dim();
     let mut cpu = Vec::new();
@@ -184,7 +193,8 @@ pub fn bench_delay(
             gpu.push(layer);
         }
     }
-    let (mut sim_time, mut cpu_time, mut gpu_time) = (0.0, vec![0.0; delays.len()], vec![0.0; delays.len()]);
+    let (mut sim_time, mut cpu_time, mut gpu_time) =
+        (0.0, vec![0.0; delays.len()], vec![0.0; delays.len()]);
     // Run the pools once before timing.
     batch.step(actions.row(0))?;
     for step in 0..steps {

@@ -117,18 +117,29 @@ fn main() -> anyhow::Result<()> {
 fn run_rollout(args: &RolloutArgs) -> anyhow::Result<()> {
     let state = read_state(&args.init_state)?;
     let actions = read_actions(&args.actions, args.task)?;
-    let delay = if args.delay.any() { Some(args.delay.apply(DelayConfig::default())?) } else { None };
+    let delay = if args.delay.any() {
+        Some(args.delay.apply(DelayConfig::default())?)
+    } else {
+        None
+    };
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     let mut write_error = None;
-    rollout(args.task, &state, &actions, delay.as_ref(), args.seed, |step| {
-        if write_error.is_none()
-            && let Err(e) = serde_json::to_writer(&mut out, step)
-                .map_err(std::io::Error::from)
-                .and_then(|_| writeln!(out))
-        {
-            write_error = Some(e);
-        }
-    })?;
+    rollout(
+        args.task,
+        &state,
+        &actions,
+        delay.as_ref(),
+        args.seed,
+        |step| {
+            if write_error.is_none()
+                && let Err(e) = serde_json::to_writer(&mut out, step)
+                    .map_err(std::io::Error::from)
+                    .and_then(|_| writeln!(out))
+            {
+                write_error = Some(e);
+            }
+        },
+    )?;
     match write_error.map_or_else(|| out.flush(), Err) {
         // A reader that stops early (`| head`) is not an error.
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
@@ -145,7 +156,14 @@ fn run_bench_delay(args: &BenchDelayArgs) -> anyhow::Result<()> {
     if !args.json {
         println!(
             "{:<14} {:>6} {:>5} {:>14} {:>14} {:>9} {:>14} {:>9}  gpu adapter",
-            "task", "envs", "delay", "sim steps/s", "cpu delay/s", "cpu share", "gpu delay/s", "gpu share"
+            "task",
+            "envs",
+            "delay",
+            "sim steps/s",
+            "cpu delay/s",
+            "cpu share",
+            "gpu delay/s",
+            "gpu share"
         );
     }
     for &envs in &args.envs {
@@ -164,7 +182,10 @@ fn run_bench_delay(args: &BenchDelayArgs) -> anyhow::Result<()> {
                 row.cpu_env_steps_per_sec,
                 100.0 * row.cpu_share_of_sim_step,
                 or_dash(row.gpu_env_steps_per_sec.map(|v| format!("{v:.0}"))),
-                or_dash(row.gpu_share_of_sim_step.map(|v| format!("{:.2}%", 100.0 * v))),
+                or_dash(
+                    row.gpu_share_of_sim_step
+                        .map(|v| format!("{:.2}%", 100.0 * v))
+                ),
                 row.gpu_adapter.as_deref().unwrap_or("none"),
             );
         }

@@ -8,23 +8,45 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::delay::{arrival_delay, CpuDelayLayer, DelayConfig, DelayError, StepInput};
+use crate::delay::{CpuDelayLayer, DelayConfig, DelayError, StepInput, arrival_delay};
 use crate::delay::{RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED};
-use crate::sim::{actuator_noise, check_vector, executed_action, Env, SimError, TaskModel};
+use crate::sim::{Env, SimError, TaskModel, actuator_noise, check_vector, executed_action};
 use crate::tasks::TaskName;
 
 #[derive(Debug, thiserror::Error)]
 pub enum RolloutError {
     #[error("cannot read {path}: {source}")]
-    Read { path: String, source: std::io::Error },
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
     #[error("{path} is not a state file: {source}; expected {{\"qpos\": [...], \"qvel\": [...]}}")]
-    StateFormat { path: String, source: serde_json::Error },
+    StateFormat {
+        path: String,
+        source: serde_json::Error,
+    },
     #[error("{path} line {line}: '{field}' is not a number")]
-    ActionNotNumber { path: String, line: usize, field: String },
-    #[error("{path} line {line}: {count} values, but {task} takes actions of {expected} (comma-separated, one action per line)")]
-    ActionWidth { path: String, line: usize, count: usize, task: TaskName, expected: usize },
+    ActionNotNumber {
+        path: String,
+        line: usize,
+        field: String,
+    },
+    #[error(
+        "{path} line {line}: {count} values, but {task} takes actions of {expected} (comma-separated, one action per line)"
+    )]
+    ActionWidth {
+        path: String,
+        line: usize,
+        count: usize,
+        task: TaskName,
+        expected: usize,
+    },
     #[error("{path} line {line}: value {value} is not finite; only finite numbers are accepted")]
-    ActionNotFinite { path: String, line: usize, value: f64 },
+    ActionNotFinite {
+        path: String,
+        line: usize,
+        value: f64,
+    },
     #[error(transparent)]
     Sim(#[from] SimError),
     #[error(transparent)]
@@ -99,12 +121,17 @@ impl TraceStep {
 }
 
 fn read(path: &Path) -> Result<String, RolloutError> {
-    std::fs::read_to_string(path).map_err(|source| RolloutError::Read { path: path.display().to_string(), source })
+    std::fs::read_to_string(path).map_err(|source| RolloutError::Read {
+        path: path.display().to_string(),
+        source,
+    })
 }
 
 pub fn read_state(path: &Path) -> Result<InitialState, RolloutError> {
-    serde_json::from_str(&read(path)?)
-        .map_err(|source| RolloutError::StateFormat { path: path.display().to_string(), source })
+    serde_json::from_str(&read(path)?).map_err(|source| RolloutError::StateFormat {
+        path: path.display().to_string(),
+        source,
+    })
 }
 
 /// Parses one action per non-empty line, comma-separated, checking width and finiteness.
@@ -113,7 +140,11 @@ pub fn read_actions(path: &Path, task: TaskName) -> Result<Vec<Vec<f64>>, Rollou
     let name = || path.display().to_string();
     let expected = task.def().act_dim;
     let mut actions = Vec::new();
-    for (index, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+    for (index, line) in text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+    {
         let line_no = index + 1;
         let action = line
             .split(',')
@@ -127,12 +158,22 @@ pub fn read_actions(path: &Path, task: TaskName) -> Result<Vec<Vec<f64>>, Rollou
                 if value.is_finite() {
                     Ok(value)
                 } else {
-                    Err(RolloutError::ActionNotFinite { path: name(), line: line_no, value })
+                    Err(RolloutError::ActionNotFinite {
+                        path: name(),
+                        line: line_no,
+                        value,
+                    })
                 }
             })
             .collect::<Result<Vec<f64>, _>>()?;
         if action.len() != expected {
-            return Err(RolloutError::ActionWidth { path: name(), line: line_no, count: action.len(), task, expected });
+            return Err(RolloutError::ActionWidth {
+                path: name(),
+                line: line_no,
+                count: action.len(),
+                task,
+                expected,
+            });
         }
         actions.push(action);
     }
@@ -165,7 +206,10 @@ pub fn rollout(
     let mut obs = vec![0.0; obs_dim];
     env.observe(&mut obs);
     let Some(config) = delay else {
-        emit(&TraceStep { obs: Some(obs.clone()), ..TraceStep::at(0) });
+        emit(&TraceStep {
+            obs: Some(obs.clone()),
+            ..TraceStep::at(0)
+        });
         for (k, action) in actions.iter().enumerate() {
             check_vector("action", action, act_dim)?;
             let outcome = env.step(action, &mut obs);
@@ -186,7 +230,14 @@ pub fn rollout(
     let delay_steps = config.total_delay()?;
     let noise = actuator_noise(config.actuator_noise)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut layer = CpuDelayLayer::new(config, 1, obs_dim, &model.action_low, &model.action_high, seed)?;
+    let mut layer = CpuDelayLayer::new(
+        config,
+        1,
+        obs_dim,
+        &model.action_low,
+        &model.action_high,
+        seed,
+    )?;
     layer.reset(&narrow(&obs))?;
     let ready_line = |layer: &CpuDelayLayer, t: usize| {
         let ready = layer.ready()[0] == 1;
@@ -212,7 +263,11 @@ pub fn rollout(
             truncated: &[u32::from(outcome.truncated)],
         })?;
         let t = k + 1;
-        let mut line = if outcome.done() { end_line(&layer, t, delay_steps) } else { ready_line(&layer, t) };
+        let mut line = if outcome.done() {
+            end_line(&layer, t, delay_steps)
+        } else {
+            ready_line(&layer, t)
+        };
         if !outcome.done()
             && let Some(record) = layer.records().iter().next()
         {
@@ -224,7 +279,8 @@ pub fn rollout(
             line.executed = Some(executed.clone());
         }
         if let Some(bound) = config.random_bound() {
-            let arrived = (t.saturating_sub(bound)..t).filter(|&tau| tau + arrival_delay(seed, 0, 0, tau as u32, bound) == t);
+            let arrived = (t.saturating_sub(bound)..t)
+                .filter(|&tau| tau + arrival_delay(seed, 0, 0, tau as u32, bound) == t);
             line.arrived = Some(arrived.collect());
         }
         emit(&line);
@@ -245,7 +301,14 @@ fn end_line(layer: &CpuDelayLayer, t: usize, delay: usize) -> TraceStep {
         states.insert(tau, widen(record.state));
         if record.meta.flags & RECORD_FINAL_STATE == 0 {
             let flags = record.meta.flags;
-            steps.insert(tau + 1, (f64::from(record.reward), flags & RECORD_TERMINATED != 0, flags & RECORD_TRUNCATED != 0));
+            steps.insert(
+                tau + 1,
+                (
+                    f64::from(record.reward),
+                    flags & RECORD_TERMINATED != 0,
+                    flags & RECORD_TRUNCATED != 0,
+                ),
+            );
         }
     }
     let delivered = |j: usize| {
@@ -260,10 +323,19 @@ fn end_line(layer: &CpuDelayLayer, t: usize, delay: usize) -> TraceStep {
     let mut line = TraceStep::at(t);
     if let Some(j) = t.checked_sub(delay) {
         let regular = delivered(j);
-        (line.obs, line.reward, line.terminated, line.truncated) = (Some(regular.obs), regular.reward, regular.terminated, regular.truncated);
+        (line.obs, line.reward, line.terminated, line.truncated) = (
+            Some(regular.obs),
+            regular.reward,
+            regular.terminated,
+            regular.truncated,
+        );
     }
     if delay > 0 {
-        line.delivered = Some((t.saturating_sub(delay) + usize::from(t >= delay)..=t).map(delivered).collect());
+        line.delivered = Some(
+            (t.saturating_sub(delay) + usize::from(t >= delay)..=t)
+                .map(delivered)
+                .collect(),
+        );
     }
     line
 }

@@ -180,10 +180,24 @@ fn trace(args: &[&str]) -> String {
 #[test]
 fn delayed_rollout_passes_the_outside_check() {
     let dir = tempfile::tempdir().unwrap();
-    let state = write(dir.path(), "state.json", r#"{"qpos": [0, 1.25, 0.01, 0, 0, 0], "qvel": [0, 0, 0, 0, 0, 0]}"#);
-    let actions: String = (0..300).map(|k| format!("{},{},{}\n", ((k * 37) % 19) as f64 / 9.0 - 1.0, 0.8, -0.6)).collect();
+    let state = write(
+        dir.path(),
+        "state.json",
+        r#"{"qpos": [0, 1.25, 0.01, 0, 0, 0], "qvel": [0, 0, 0, 0, 0, 0]}"#,
+    );
+    let actions: String = (0..300)
+        .map(|k| format!("{},{},{}\n", ((k * 37) % 19) as f64 / 9.0 - 1.0, 0.8, -0.6))
+        .collect();
     let actions = write(dir.path(), "actions.csv", &actions);
-    let base = ["rollout", "--task", "hopper", "--init-state", &state, "--actions", &actions];
+    let base = [
+        "rollout",
+        "--task",
+        "hopper",
+        "--init-state",
+        &state,
+        "--actions",
+        &actions,
+    ];
     let undelayed = write(dir.path(), "undelayed.jsonl", &trace(&base));
     let steps = undelayed.len();
     assert!(steps > 0);
@@ -202,18 +216,44 @@ fn delayed_rollout_passes_the_outside_check() {
         let delayed = write(dir.path(), "delayed.jsonl", &text);
         let out = Command::new(env!("DHRL_PYTHON"))
             .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check_delayed_trace.py"))
-            .args(["--delay", delay, "--undelayed", &undelayed, "--delayed", &delayed, "--actions", &actions])
+            .args([
+                "--delay",
+                delay,
+                "--undelayed",
+                &undelayed,
+                "--delayed",
+                &delayed,
+                "--actions",
+                &actions,
+            ])
             .output()
             .unwrap();
-        assert!(out.status.success(), "Δ {delay} {options:?}: {}", stderr(&out));
+        assert!(
+            out.status.success(),
+            "Δ {delay} {options:?}: {}",
+            stderr(&out)
+        );
         let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        assert!(summary["ended"].as_bool().unwrap(), "the Hopper episode must end: {summary}");
+        assert!(
+            summary["ended"].as_bool().unwrap(),
+            "the Hopper episode must end: {summary}"
+        );
         if delay != "60" {
-            assert!(summary["augmented_checked"].as_u64().unwrap() > 5, "{summary}");
+            assert!(
+                summary["augmented_checked"].as_u64().unwrap() > 5,
+                "{summary}"
+            );
         }
         if options.contains(&"--random-delay") {
-            let lines: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-            let arrivals: usize = lines.iter().filter_map(|l| l["arrived"].as_array()).map(|a| a.len()).sum();
+            let lines: Vec<serde_json::Value> = text
+                .lines()
+                .map(|l| serde_json::from_str(l).unwrap())
+                .collect();
+            let arrivals: usize = lines
+                .iter()
+                .filter_map(|l| l["arrived"].as_array())
+                .map(|a| a.len())
+                .sum();
             assert!(arrivals > 0, "arrivals are listed under random delays");
         }
     }
@@ -226,12 +266,26 @@ fn bad_delay_options_are_clear_errors() {
     let state = write(dir.path(), "state.json", state);
     let actions = write(dir.path(), "actions.csv", "0\n");
     let run = |extra: &[&str]| {
-        let mut args = vec!["rollout", "--task", "inverted-pendulum", "--init-state", &state, "--actions", &actions];
+        let mut args = vec![
+            "rollout",
+            "--task",
+            "inverted-pendulum",
+            "--init-state",
+            &state,
+            "--actions",
+            &actions,
+        ];
         args.extend_from_slice(extra);
         dhrl(&args)
     };
-    assert_error(&run(&["--delay", "-2"]), "--delay must be a whole number of steps ≥ 0, got -2");
+    assert_error(
+        &run(&["--delay", "-2"]),
+        "--delay must be a whole number of steps ≥ 0, got -2",
+    );
     assert_error(&run(&["--random-delay"]), "needs its bound");
     assert_error(&run(&["--delay", "200"]), "above the supported maximum 64");
-    assert_error(&run(&["--actuator-noise", "-1"]), "actuator noise σ must be a finite number ≥ 0");
+    assert_error(
+        &run(&["--actuator-noise", "-1"]),
+        "actuator noise σ must be a finite number ≥ 0",
+    );
 }

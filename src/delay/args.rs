@@ -33,7 +33,9 @@ pub struct NegativeDelay {
 }
 
 fn steps(flag: &'static str, value: Option<i64>) -> Result<Option<usize>, NegativeDelay> {
-    value.map(|v| usize::try_from(v).map_err(|_| NegativeDelay { flag, value: v })).transpose()
+    value
+        .map(|v| usize::try_from(v).map_err(|_| NegativeDelay { flag, value: v }))
+        .transpose()
 }
 
 impl DelayArgs {

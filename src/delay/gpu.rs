@@ -342,7 +342,10 @@ impl GpuDelayLayer {
 
     /// Blocks until the device has finished every submitted step.
     pub fn wait(&self) -> Result<(), GpuError> {
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Readback(e.to_string()))
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Readback(e.to_string()))
     }
 
     /// Copies a device buffer back to the host.

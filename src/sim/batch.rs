@@ -292,7 +292,11 @@ pub fn executed_action(
 /// non-finite σ.
 pub fn actuator_noise(sigma: f64) -> Result<Option<Normal<f64>>, SimError> {
     if !(sigma.is_finite() && sigma >= 0.0) {
-        return Err(SimError::TooSmall { what: "the actuator noise σ (finite)", found: sigma, min: 0.0 });
+        return Err(SimError::TooSmall {
+            what: "the actuator noise σ (finite)",
+            found: sigma,
+            min: 0.0,
+        });
     }
     Ok((sigma > 0.0).then(|| Normal::new(0.0, sigma).expect("σ is finite and positive")))
 }

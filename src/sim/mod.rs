@@ -5,7 +5,7 @@ mod batch;
 mod env;
 mod model;
 
-pub use batch::{actuator_noise, executed_action, BatchConfig, BatchedEnv};
+pub use batch::{BatchConfig, BatchedEnv, actuator_noise, executed_action};
 pub use env::{Env, StepOutcome};
 pub use model::{TaskModel, assets_dir};
 
