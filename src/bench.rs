@@ -232,3 +232,79 @@ pub fn bench_delay(
         })
         .collect())
 }
+
+/// The figures `dhrl bench update` prints.
+#[derive(Debug, Clone, Serialize)]
+pub struct UpdateBenchReport {
+    pub algo: crate::algos::Algo,
+    pub task: TaskName,
+    pub delay: usize,
+    pub batch_size: usize,
+    pub device: crate::learn::LearnDevice,
+    pub updates: usize,
+    pub updates_per_sec: f64,
+    pub ms_per_update: f64,
+}
+
+/// Gradient updates per second of `algo` at the sizes of `task` under delay `delay`, on
+/// random batches (the update's cost does not depend on the values).
+pub fn bench_update(
+    algo: crate::algos::Algo,
+    task: TaskName,
+    delay: usize,
+    batch_size: usize,
+    device: crate::learn::LearnDevice,
+    updates: usize,
+) -> Result<UpdateBenchReport, crate::learn::LearnError> {
+    use crate::algos::{AgentSpec, Hyper, build_agent};
+    use crate::delay::Transitions;
+    let def = task.def();
+    let model = TaskModel::load(task).map_err(|e| crate::learn::LearnError::Load {
+        what: task.to_string(),
+        message: e.to_string(),
+    })?;
+    let spec = AgentSpec {
+        obs_dim: def.obs_dim,
+        act_dim: def.act_dim,
+        delay,
+        action_low: model.action_low.clone(),
+        action_high: model.action_high.clone(),
+    };
+    let devices = crate::learn::Devices::new(device)?;
+    let mut agent = build_agent(algo, &spec, &Hyper::default(), &devices, 0);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut random = |n: usize| {
+        (0..n)
+            .map(|_| rng.random_range(-1.0f32..1.0))
+            .collect::<Vec<f32>>()
+    };
+    let (b, aug, obs, act) = (batch_size, spec.augmented_dim(), spec.obs_dim, spec.act_dim);
+    let batch = Transitions {
+        copy: vec![0; b],
+        episode: vec![0; b],
+        tau: vec![0; b],
+        augmented: random(b * aug),
+        state: random(b * obs),
+        action: random(b * act),
+        reward: random(b),
+        next_augmented: random(b * aug),
+        next_state: random(b * obs),
+        terminated: vec![0; b],
+    };
+    agent.update(&batch); // warm-up: allocations, lazy initialisation
+    let start = Instant::now();
+    for _ in 0..updates {
+        agent.update(&batch);
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    Ok(UpdateBenchReport {
+        algo,
+        task,
+        delay,
+        batch_size,
+        device,
+        updates,
+        updates_per_sec: updates as f64 / seconds,
+        ms_per_update: 1e3 * seconds / updates as f64,
+    })
+}

@@ -1,7 +1,11 @@
 //! dhrl: delayed homomorphic reinforcement learning on batched MuJoCo tasks.
+pub mod algos;
 pub mod bench;
 pub mod delay;
+pub mod learn;
 pub mod rollout;
 pub mod sim;
+pub mod snapshot;
 pub mod tabular;
 pub mod tasks;
+pub mod train;

@@ -5,11 +5,14 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 
-use dhrl::bench::{bench_delay, bench_env};
+use dhrl::algos::Algo;
+use dhrl::bench::{bench_delay, bench_env, bench_update};
 use dhrl::delay::{DelayArgs, DelayConfig};
+use dhrl::learn::LearnDevice;
 use dhrl::rollout::{read_actions, read_state, rollout};
 use dhrl::tabular::{TabularArgs, TabularBenchArgs, run_tabular, run_tabular_bench};
 use dhrl::tasks::TaskName;
+use dhrl::train::{Start, TrainConfig, evaluate_saved, train};
 
 #[derive(Parser)]
 #[command(
@@ -24,6 +27,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Train an agent (defaults: delay-free SAC on InvertedPendulum, a few minutes).
+    Train(Box<TrainArgs>),
+    /// Evaluate the saved policy of a run.
+    Eval(EvalArgs),
     /// Trace one episode from a given state and action sequence, one JSON object per line.
     Rollout(RolloutArgs),
     /// Measure throughput.
@@ -33,6 +40,68 @@ enum Command {
     Tabular(TabularArgs),
     /// Q-learning sample complexity on the augmented vs the abstract MDP, across delays.
     TabularBench(TabularBenchArgs),
+}
+
+#[derive(Args)]
+struct TrainArgs {
+    #[arg(long, value_enum)]
+    task: Option<TaskName>,
+    #[arg(long, value_enum)]
+    algo: Option<Algo>,
+    #[command(flatten)]
+    delay: DelayArgs,
+    /// Environment steps in total.
+    #[arg(long)]
+    steps: Option<u64>,
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Copies collecting in parallel (1: the paper's protocol, one update per step).
+    #[arg(long)]
+    envs: Option<usize>,
+    /// Simulation threads.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Uniform random steps before learning starts.
+    #[arg(long)]
+    warmup_steps: Option<u64>,
+    #[arg(long)]
+    eval_every: Option<u64>,
+    #[arg(long)]
+    eval_episodes: Option<usize>,
+    #[arg(long)]
+    checkpoint_every: Option<u64>,
+    #[arg(long)]
+    batch_size: Option<usize>,
+    /// Initial entropy temperature α.
+    #[arg(long)]
+    alpha: Option<f64>,
+    /// Keep α fixed instead of learning it.
+    #[arg(long)]
+    fixed_alpha: bool,
+    #[arg(long, value_enum)]
+    device: Option<LearnDevice>,
+    /// TOML file with any fields of config.toml; flags override it.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Run folder (must not exist; default runs/<task>-<algo>-d<delay>-s<seed>-<time>).
+    #[arg(long, value_name = "DIR", conflicts_with = "resume")]
+    out: Option<PathBuf>,
+    /// Continue the run in DIR from its last checkpoint (with --steps to extend it).
+    #[arg(long, value_name = "DIR")]
+    resume: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct EvalArgs {
+    /// A run folder written by `dhrl train`.
+    run: PathBuf,
+    #[arg(long, default_value_t = 10)]
+    episodes: usize,
+    /// Evaluate under other delay options than the run's.
+    #[command(flatten)]
+    delay: DelayArgs,
+    #[arg(long, default_value_t = 12345)]
+    seed: u64,
 }
 
 #[derive(Args)]
@@ -59,6 +128,28 @@ enum BenchCommand {
     Env(BenchEnvArgs),
     /// The delay layer alone, on CPU and GPU, beside the simulation step it adds to.
     Delay(BenchDelayArgs),
+    /// Gradient updates per second of an algorithm at a task's sizes.
+    Update(BenchUpdateArgs),
+}
+
+#[derive(Args)]
+struct BenchUpdateArgs {
+    #[arg(long, value_enum, default_value_t = Algo::Sac)]
+    algo: Algo,
+    #[arg(long, value_enum, default_value_t = TaskName::HalfCheetah)]
+    task: TaskName,
+    /// Total delay Δ (sizes the augmented input).
+    #[arg(long, default_value_t = 0)]
+    delay: usize,
+    #[arg(long, default_value_t = 256)]
+    batch_size: usize,
+    #[arg(long, value_enum, default_value_t = LearnDevice::Cpu)]
+    device: LearnDevice,
+    /// Updates to time.
+    #[arg(long, default_value_t = 200)]
+    updates: usize,
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -106,12 +197,117 @@ struct BenchEnvArgs {
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
+        Command::Train(args) => run_train(&args),
+        Command::Eval(args) => run_eval(&args),
         Command::Rollout(args) => run_rollout(&args),
         Command::Bench(BenchCommand::Env(args)) => run_bench_env(&args),
         Command::Bench(BenchCommand::Delay(args)) => run_bench_delay(&args),
+        Command::Bench(BenchCommand::Update(args)) => run_bench_update(&args),
         Command::Tabular(args) => run_tabular(&args),
         Command::TabularBench(args) => run_tabular_bench(&args),
     }
+}
+
+/// The configuration of `dhrl train`: defaults, then `--config`, then flags.
+fn train_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
+    let mut c = match &args.config {
+        Some(path) => TrainConfig::from_toml_file(path)?,
+        None => TrainConfig::default(),
+    };
+    c.task = args.task.unwrap_or(c.task);
+    c.algo = args.algo.unwrap_or(c.algo);
+    c.delay = args.delay.apply(c.delay)?;
+    c.steps = args.steps.unwrap_or(c.steps);
+    c.seed = args.seed.unwrap_or(c.seed);
+    c.envs = args.envs.unwrap_or(c.envs);
+    c.threads = args.threads.unwrap_or(c.threads);
+    c.warmup_steps = args.warmup_steps.unwrap_or(c.warmup_steps);
+    c.eval_every = args.eval_every.unwrap_or(c.eval_every);
+    c.eval_episodes = args.eval_episodes.unwrap_or(c.eval_episodes);
+    c.checkpoint_every = args.checkpoint_every.unwrap_or(c.checkpoint_every);
+    c.batch_size = args.batch_size.unwrap_or(c.batch_size);
+    c.hyper.initial_alpha = args.alpha.unwrap_or(c.hyper.initial_alpha);
+    c.hyper.autotune_alpha &= !args.fixed_alpha;
+    c.device = args.device.unwrap_or(c.device);
+    Ok(c)
+}
+
+fn run_train(args: &TrainArgs) -> anyhow::Result<()> {
+    let (run, start, config) = match &args.resume {
+        Some(dir) => {
+            let given = args.task.is_some()
+                || args.algo.is_some()
+                || args.delay.any()
+                || args.config.is_some()
+                || args.seed.is_some();
+            anyhow::ensure!(
+                !given,
+                "--resume continues {} with its own config.toml; only --steps may be given with it",
+                dir.display()
+            );
+            let steps = args.steps.unwrap_or(0);
+            (
+                dir.clone(),
+                Start::Resume,
+                TrainConfig {
+                    steps,
+                    ..TrainConfig::default()
+                },
+            )
+        }
+        None => {
+            let config = train_config(args)?;
+            let delay = config.validate()?;
+            let run = args.out.clone().unwrap_or_else(|| {
+                let stamp = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_secs());
+                PathBuf::from(format!(
+                    "runs/{}-{}-d{delay}-s{}-{stamp}",
+                    config.task, config.algo, config.seed
+                ))
+            });
+            (run, Start::Fresh, config)
+        }
+    };
+    eprintln!("run folder: {}", run.display());
+    let summary = train(
+        &config,
+        &run,
+        start,
+        std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    )?;
+    match summary.last_eval {
+        Some(e) => println!(
+            "{} env steps, {} updates in {:.0} s; last evaluation: return {:.1} ± {:.1} over {} episodes (mean length {:.0})",
+            summary.env_steps,
+            summary.updates,
+            summary.wall_seconds,
+            e.return_mean,
+            e.return_std,
+            e.episodes,
+            e.length_mean
+        ),
+        None => println!(
+            "{} env steps, {} updates in {:.0} s",
+            summary.env_steps, summary.updates, summary.wall_seconds
+        ),
+    }
+    Ok(())
+}
+
+fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
+    let delay = if args.delay.any() {
+        Some(args.delay.apply(DelayConfig::default())?)
+    } else {
+        None
+    };
+    let result = evaluate_saved(&args.run, args.episodes, delay, args.seed)?;
+    println!(
+        "return {:.2} ± {:.2} over {} episodes (mean length {:.1})",
+        result.return_mean, result.return_std, result.episodes, result.length_mean
+    );
+    Ok(())
 }
 
 fn run_rollout(args: &RolloutArgs) -> anyhow::Result<()> {
@@ -145,6 +341,32 @@ fn run_rollout(args: &RolloutArgs) -> anyhow::Result<()> {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         result => result.context("writing the trace to stdout"),
     }
+}
+
+fn run_bench_update(args: &BenchUpdateArgs) -> anyhow::Result<()> {
+    let report = bench_update(
+        args.algo,
+        args.task,
+        args.delay,
+        args.batch_size,
+        args.device,
+        args.updates,
+    )?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "{} on {} sizes, delay {}, batch {}, {:?}: {:.1} updates/s ({:.2} ms per update)",
+            report.algo,
+            report.task,
+            report.delay,
+            report.batch_size,
+            report.device,
+            report.updates_per_sec,
+            report.ms_per_update
+        );
+    }
+    Ok(())
 }
 
 fn all_cores() -> usize {

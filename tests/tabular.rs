@@ -4,15 +4,16 @@
 
 use std::io::Write;
 use std::path::Path;
+use std::time::{Duration, Instant};
 
 use clap::Parser;
 use dhrl::tabular::{
     AnalysisOptions, AugmentedMdp, BenchConfig, CHECK_TOLERANCE, DEFAULT_MAX_AUGMENTED_STATES,
     DelayedEnv, Environment, FiniteMdp, ModelEnv, Partition, QLearningConfig, QuotientMdp,
-    RandomMdpSpec, SizeLimits, SolveOptions, TabularArgs, TabularError, TabularModel, analyze,
-    approximate_belief_partition, belief_partition, check_homomorphism, evaluate_abstraction,
-    evaluate_policy, q_learning, random_mdp, run_bench, run_tabular, total_variation,
-    value_iteration, value_loss_bound, write_bench_plot,
+    RandomMdpSpec, SizeLimits, SolveOptions, TabularArgs, TabularBenchArgs, TabularError,
+    TabularModel, analyze, approximate_belief_partition, belief_partition, check_homomorphism,
+    evaluate_abstraction, evaluate_policy, q_learning, random_mdp, run_bench, run_tabular,
+    run_tabular_bench, total_variation, value_iteration, value_loss_bound, write_bench_plot,
 };
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -833,6 +834,16 @@ fn report_json_has_the_documented_keys() {
     }
     assert!(value.get("value_loss_bound").is_none());
     assert_eq!(value["augmented_states"], 16);
+    // Prop. 3.5 holds under deterministic dynamics only: the key is there, but null.
+    assert!(!plain.deterministic);
+    assert_eq!(plain.compression_bound, None);
+    assert!(value["compression_bound"].is_null(), "{value}");
+    assert!(plain.to_table().contains("n/a (stochastic dynamics"));
+    let exact =
+        analyze(&deterministic(4, 2, 1), 2, &AnalysisOptions::default()).expect("small problem");
+    assert_eq!(exact.compression_bound, Some(0.25));
+    let value = serde_json::to_value(&exact).expect("serialisable");
+    assert_eq!(value["compression_bound"].as_f64(), Some(0.25));
 
     let options = AnalysisOptions {
         epsilon: Some(0.2),
@@ -947,4 +958,466 @@ fn run_tabular_handles_file_and_random_sources() {
             .expect("parses; the missing --actions is reported when running");
     let error = run_tabular(&missing.args).expect_err("--actions missing");
     assert!(error.to_string().contains("--actions"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Hand-computed examples: Lemma 3.7, the ε-partition, the homomorphism checks
+// ---------------------------------------------------------------------------------------------
+
+/// Three states, two actions, `γ = ½`:
+///
+/// | (s, a)  | P(·|s, a)        | R(s, a) |
+/// |---------|------------------|---------|
+/// | (0, a0) | 0 w.p. 1         | 1       |
+/// | (0, a1) | 0, 2 w.p. ½ each | 0       |
+/// | (1, a0) | 1, 2 w.p. ½ each | 0       |
+/// | (1, a1) | 1 w.p. 1         | 3       |
+/// | (2, ·)  | 2 w.p. 1         | ¼       |
+fn lemma_3_7_example() -> FiniteMdp {
+    let rows = vec![
+        vec![(0, 1.0)],
+        vec![(0, 0.5), (2, 0.5)],
+        vec![(1, 0.5), (2, 0.5)],
+        vec![(1, 1.0)],
+        vec![(2, 1.0)],
+        vec![(2, 1.0)],
+    ];
+    let rewards = vec![1.0, 0.0, 0.0, 3.0, 0.25, 0.25];
+    FiniteMdp::from_sparse(3, 2, 0.5, rows, rewards).expect("valid example")
+}
+
+/// Lemma 3.7 on `lemma_3_7_example` with the partition `A = {0, 1}`, `B = {2}` and uniform
+/// weights, every number by hand:
+///
+/// * Quotient: `R̄(A, a0) = (1 + 0)/2 = ½`, `R̄(A, a1) = (0 + 3)/2 = 3/2`, `R̄(B, ·) = ¼`.
+///   Block transitions: `(0, a0) → A:1`, `(1, a0) → A:½ B:½`, so `P̄(·|A, a0) = (¾, ¼)`;
+///   `(0, a1) → A:½ B:½`, `(1, a1) → A:1`, so `P̄(·|A, a1) = (¾, ¼)`; `P̄(B|B, ·) = 1`.
+/// * `C1 = max |R − R̄|`: `(0,a0) ½, (0,a1) 3/2, (1,a0) ½, (1,a1) 3/2, (2,·) 0`, so `C1 = 3/2`.
+/// * `C2 = max L1`: `(0,a0) |1−¾| + |0−¼| = ½`, likewise `½` for the other three pairs of `A`
+///   and `0` for state 2, so `C2 = ½`.
+/// * `ξ = max R̄ − min R̄ = 3/2 − ¼ = 5/4`.
+/// * Bound `= 2/(1−γ)·(C1 + γ ξ C2 / (2(1−γ))) = 4·(3/2 + ½·5/4·½/1) = 4·(3/2 + 5/16) = 29/4`.
+/// * `V*`: state 2: `¼/(1−½) = ½`; state 1: `a1` forever, `3/(1−½) = 6` (`a0` gives
+///   `½(½·6 + ½·½) = 13/8`); state 0: `a0` forever, `1/(1−½) = 2` (`a1` gives `½(½·2 + ½·½) = 5/8`).
+/// * Abstract: `V̄(B) = ½`; the rows of `a0` and `a1` agree, so `a1` (reward 3/2) wins:
+///   `V̄(A) = 3/2 + ½(¾ V̄(A) + ¼·½)`, `V̄(A) = 5/2`.
+/// * Lifted policy `a1` in states 0 and 1: `V(0) = ½(½ V(0) + ½·½)`, `V(0) = 1/6`; `V(1) = 6`;
+///   `V(2) = ½`. Value loss `2 − 1/6 = 11/6` (at state 0), value gap
+///   `max(|2 − 5/2|, |6 − 5/2|, |½ − ½|) = 7/2` (at state 1).
+#[test]
+fn lemma_3_7_terms_match_a_hand_computed_example() {
+    let mdp = lemma_3_7_example();
+    let partition = Partition::from_labels(&[0, 0, 1]);
+    assert_eq!(partition.num_blocks(), 2);
+    let quotient = QuotientMdp::new(&mdp, &partition).expect("consistent");
+    let abstract_mdp = quotient.abstract_mdp();
+    assert_eq!(abstract_mdp.reward(0, 0), 0.5);
+    assert_eq!(abstract_mdp.reward(0, 1), 1.5);
+    assert_eq!(abstract_mdp.reward(1, 0), 0.25);
+    assert_eq!(abstract_mdp.reward(1, 1), 0.25);
+    for action in 0..2 {
+        let row: Vec<(usize, f64)> = abstract_mdp.successors(0, action).collect();
+        assert_eq!(row, vec![(0, 0.75), (1, 0.25)]);
+        let row: Vec<(usize, f64)> = abstract_mdp.successors(1, action).collect();
+        assert_eq!(row, vec![(1, 1.0)]);
+    }
+
+    let bound = value_loss_bound(&mdp, &quotient).expect("consistent");
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+    assert!(close(bound.c1, 1.5), "{bound:?}");
+    assert!(close(bound.c2, 0.5), "{bound:?}");
+    assert!(close(bound.xi, 1.25), "{bound:?}");
+    assert_eq!(bound.gamma, 0.5);
+    assert!(close(bound.bound, 7.25), "{bound:?}");
+
+    let optimal = value_iteration(&mdp, &precise()).expect("converges");
+    for (value, expected) in optimal.values.iter().zip([2.0, 6.0, 0.5]) {
+        assert!((value - expected).abs() < 1e-9, "{:?}", optimal.values);
+    }
+    assert_eq!(&optimal.policy[..2], &[0, 1]);
+    let abstract_solution = value_iteration(abstract_mdp, &precise()).expect("converges");
+    assert!((abstract_solution.values[0] - 2.5).abs() < 1e-9);
+    assert!((abstract_solution.values[1] - 0.5).abs() < 1e-9);
+    assert_eq!(abstract_solution.policy[0], 1);
+    let lifted = quotient
+        .lift_policy(&abstract_solution.policy)
+        .expect("valid policy");
+    assert_eq!(&lifted[..2], &[1, 1]);
+
+    let quality =
+        evaluate_abstraction(&mdp, &optimal.values, &quotient, &precise()).expect("converges");
+    assert!(
+        (quality.lifted_policy_value_loss - 11.0 / 6.0).abs() < 1e-9,
+        "{quality:?}"
+    );
+    assert!((quality.max_value_gap - 3.5).abs() < 1e-9, "{quality:?}");
+    assert!(quality.lifted_policy_value_loss > 1.0 && quality.max_value_gap > 1.0);
+    assert!(quality.lifted_policy_value_loss <= bound.bound);
+}
+
+/// Two states, one action, `γ = ½`: `P(·|0) = (0.6, 0.4)`, `P(·|1) = (½, ½)`, `R = (1, 0)`.
+/// With delay 1, `x0 = (0, a0)` and `x1 = (1, a0)` have beliefs `(0.6, 0.4)` and `(½, ½)`, at
+/// total-variation distance `½(0.1 + 0.1) = 0.1`.
+fn near_beliefs_mdp() -> FiniteMdp {
+    FiniteMdp::new(
+        0.5,
+        &[vec![vec![0.6, 0.4]], vec![vec![0.5, 0.5]]],
+        &[vec![1.0], vec![0.0]],
+    )
+    .expect("valid MDP")
+}
+
+#[test]
+fn epsilon_partition_merges_beliefs_closer_than_epsilon() {
+    let model = augment(&near_beliefs_mdp(), 1);
+    assert_eq!(model.num_states(), 2);
+    let (x0, x1) = (
+        model.encode(0, &[0]).expect("valid"),
+        model.encode(1, &[0]).expect("valid"),
+    );
+    let (b0, b1) = (
+        model.belief(x0).expect("valid"),
+        model.belief(x1).expect("valid"),
+    );
+    assert_ne!(b0, b1);
+    let distance = total_variation(&b0, &b1);
+    assert!((distance - 0.1).abs() < 1e-12, "{distance}");
+
+    let exact = belief_partition(&model);
+    assert_ne!(exact.block_of(x0), exact.block_of(x1));
+    assert_eq!(exact.num_blocks(), 2);
+    let merged = approximate_belief_partition(&model, 0.2).expect("valid epsilon");
+    assert_eq!(merged.block_of(x0), merged.block_of(x1), "TV 0.1 <= 0.2");
+    assert_eq!(merged.num_blocks(), 1);
+    let apart = approximate_belief_partition(&model, 0.05).expect("valid epsilon");
+    assert_ne!(apart.block_of(x0), apart.block_of(x1), "TV 0.1 > 0.05");
+}
+
+/// Lemma 3.7 through `analyze` on `near_beliefs_mdp` at delay 1 with ε = 0.2 (one block), by
+/// hand:
+///
+/// * `R_Δ(x0) = 0.6·1 + 0.4·0 = 0.6`, `R_Δ(x1) = ½`; `P_Δ(·|x0) = (0.6, 0.4)`,
+///   `P_Δ(·|x1) = (½, ½)` (the next augmented state is `(s', a0)`).
+/// * Quotient (one block, uniform weights): `R̄ = 0.55`, `P̄ = 1`, so `V̄ = 0.55/(1−½) = 1.1`.
+/// * `C1 = max(|0.6 − 0.55|, |0.5 − 0.55|) = 0.05`, `C2 = 0` (one block), `ξ = 0` (one abstract
+///   reward), bound `= 2/(1−½)·0.05 = 0.2`.
+/// * `V*`: `V0 = 0.6 + ½(0.6 V0 + 0.4 V1)`, `V1 = ½ + ½(½ V0 + ½ V1)` give `V0 = 22/19`,
+///   `V1 = 20/19`; the value gap is `max(22/19 − 11/10, 11/10 − 20/19) = 11/190`.
+/// * One action, so the lifted policy is optimal: loss 0.
+#[test]
+fn lemma_3_7_epsilon_abstraction_of_a_delayed_mdp_by_hand() {
+    let options = AnalysisOptions {
+        epsilon: Some(0.2),
+        solve: precise(),
+        ..AnalysisOptions::default()
+    };
+    let report = analyze(&near_beliefs_mdp(), 1, &options).expect("small problem");
+    assert_eq!(report.augmented_states, 2);
+    assert_eq!(report.abstract_states, 2);
+    assert!(report.max_value_gap < 1e-9 && report.lifted_policy_value_loss < 1e-9);
+    let approximate = report.approximate.expect("epsilon requested");
+    assert_eq!(approximate.approx_abstract_states, 1);
+    assert_eq!(approximate.approx_compression_ratio, 0.5);
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+    assert!(close(approximate.c1, 0.05), "{approximate:?}");
+    assert!(close(approximate.c2, 0.0), "{approximate:?}");
+    assert!(close(approximate.xi, 0.0), "{approximate:?}");
+    assert!(close(approximate.value_loss_bound, 0.2), "{approximate:?}");
+    assert!(
+        close(approximate.approx_max_value_gap, 11.0 / 190.0),
+        "{approximate:?}"
+    );
+    assert!(approximate.approx_lifted_policy_value_loss < 1e-9);
+}
+
+/// Three states, one action: `0 → 2`, `1 → 0`, `2 → 2`, rewards `(1, 0, 0)`.
+fn mixed_reward_mdp() -> FiniteMdp {
+    let rows = vec![vec![(2, 1.0)], vec![(0, 1.0)], vec![(2, 1.0)]];
+    FiniteMdp::from_sparse(3, 1, 0.9, rows, vec![1.0, 0.0, 0.0]).expect("valid MDP")
+}
+
+#[test]
+fn partitions_mixing_rewards_are_not_reward_respecting() {
+    let mdp = mixed_reward_mdp();
+    let check = |labels: &[usize]| {
+        check_homomorphism(&mdp, &Partition::from_labels(labels), CHECK_TOLERANCE)
+            .expect("sizes match")
+    };
+
+    // {0, 2} | {1}: rewards 1 and 0 share a block; both members move into their own block.
+    let mixed = check(&[0, 1, 0]);
+    assert!(!mixed.reward_respecting, "{mixed:?}");
+    assert!(mixed.ssp, "{mixed:?}");
+    assert_eq!(mixed.max_reward_difference, 1.0);
+    assert_eq!(mixed.max_transition_difference, 0.0);
+    let quotient = QuotientMdp::new(&mdp, &Partition::from_labels(&[0, 1, 0])).expect("consistent");
+    assert_eq!(quotient.abstract_mdp().reward(0, 0), 0.5);
+
+    // {0} | {1, 2}: equal rewards, but 1 moves to {0} and 2 stays in {1, 2}.
+    let split = check(&[0, 1, 1]);
+    assert!(split.reward_respecting, "{split:?}");
+    assert!(!split.ssp, "{split:?}");
+    assert_eq!(split.max_reward_difference, 0.0);
+    assert_eq!(split.max_transition_difference, 1.0);
+
+    // {0, 1} | {2}: different rewards and different block transitions.
+    let neither = check(&[0, 0, 1]);
+    assert!(!neither.reward_respecting && !neither.ssp, "{neither:?}");
+
+    let discrete = check(&[0, 1, 2]);
+    assert!(discrete.reward_respecting && discrete.ssp, "{discrete:?}");
+}
+
+#[test]
+fn reward_check_tolerance_is_relative_to_the_reward_scale() {
+    // Two absorbing states in one block: the SSP holds, only the rewards differ.
+    let respecting = |r0: f64, r1: f64| {
+        let mdp = FiniteMdp::from_sparse(
+            2,
+            1,
+            0.9,
+            vec![vec![(0, 1.0)], vec![(1, 1.0)]],
+            vec![r0, r1],
+        )
+        .expect("valid MDP");
+        let check = check_homomorphism(&mdp, &Partition::from_labels(&[0, 0]), CHECK_TOLERANCE)
+            .expect("sizes match");
+        assert!(check.ssp);
+        check.reward_respecting
+    };
+    // 1e-4 apart at scale 1e6: within 1e-9·1e6 = 1e-3.
+    assert!(respecting(1e6, 1e6 + 1e-4));
+    // 1e-4 apart at scale 1: not within 1e-9.
+    assert!(!respecting(1.0, 1.0 + 1e-4));
+    // Small rewards keep the absolute floor 1e-9·max(1, ·) = 1e-9.
+    assert!(respecting(1e-3, 1e-3 + 5e-10));
+    assert!(!respecting(1e-3, 1e-3 + 1e-8));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Sizes, solver limits and input shapes
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn random_source_is_refused_before_it_is_generated() {
+    let run = |extra: &[&str]| {
+        let mut argv = vec!["tabular", "--random"];
+        argv.extend_from_slice(extra);
+        let cli = TabularCli::try_parse_from(argv).expect("valid arguments");
+        let start = Instant::now();
+        let error = run_tabular(&cli.args).expect_err("too large");
+        assert!(
+            start.elapsed() < Duration::from_secs(2),
+            "refused only after {:?}",
+            start.elapsed()
+        );
+        error
+    };
+    let error = run(&["--states", "100000000", "--actions", "100", "--delay", "0"]);
+    match error.downcast_ref::<TabularError>() {
+        Some(TabularError::TooLarge {
+            states,
+            actions,
+            delay,
+            augmented_states,
+            limit,
+        }) => {
+            assert_eq!((*states, *actions, *delay), (100_000_000, 100, 0));
+            assert_eq!(*augmented_states, 100_000_000);
+            assert_eq!(*limit, DEFAULT_MAX_AUGMENTED_STATES);
+        }
+        other => panic!("expected TooLarge, got {other:?} ({error})"),
+    }
+    let error = run(&["--states", "1000", "--actions", "100", "--delay", "3"]);
+    assert!(
+        matches!(
+            error.downcast_ref::<TabularError>(),
+            Some(TabularError::TooLarge {
+                augmented_states: 1_000_000_000,
+                ..
+            })
+        ),
+        "{error}"
+    );
+    // Within a huge limit the table sizes overflow: checked, not wrapped.
+    let max = usize::MAX.to_string();
+    let error = run(&[
+        "--states",
+        max.as_str(),
+        "--actions",
+        "2",
+        "--delay",
+        "0",
+        "--max-augmented-states",
+        max.as_str(),
+    ]);
+    assert!(
+        matches!(
+            error.downcast_ref::<TabularError>(),
+            Some(TabularError::TableTooLarge { .. })
+        ),
+        "{error}"
+    );
+
+    // The generator itself checks |S|·|A| and its allocation.
+    for (states, actions) in [(usize::MAX, 2), (1 << 40, 1 << 20)] {
+        let result = random_mdp(&RandomMdpSpec {
+            states,
+            actions,
+            gamma: 0.9,
+            stochastic: 0.0,
+            seed: 0,
+        });
+        assert!(
+            matches!(result, Err(TabularError::TableTooLarge { .. })),
+            "{result:?}"
+        );
+    }
+}
+
+#[test]
+fn solver_names_gamma_when_it_needs_too_many_sweeps() {
+    let single =
+        |gamma: f64| FiniteMdp::new(gamma, &[vec![vec![1.0]]], &[vec![1.0]]).expect("valid MDP");
+    // γ = 0.999999 from a first change of 1 to the default tolerance 1e-10 needs
+    // ln(1e-10·1e-6)/ln(0.999999) ≈ 3.7e7 sweeps, above the default limit of 1e6: stop at once.
+    let slow = single(0.999_999);
+    let errors = [
+        value_iteration(&slow, &SolveOptions::default()).expect_err("too slow"),
+        evaluate_policy(&slow, &[0], None, &SolveOptions::default()).expect_err("too slow"),
+    ];
+    for error in errors {
+        match &error {
+            TabularError::NotConverged {
+                iterations,
+                limit,
+                needed,
+                gamma,
+                ..
+            } => {
+                assert_eq!(*iterations, 1);
+                assert_eq!(*limit, 1_000_000);
+                assert!((36_000_000..38_000_000).contains(needed), "{error}");
+                assert_eq!(*gamma, 0.999_999);
+            }
+            other => panic!("expected NotConverged, got {other:?}"),
+        }
+        let message = error.to_string();
+        assert!(message.contains("gamma = 0.999999"), "{message}");
+        assert!(message.contains("smaller gamma"), "{message}");
+    }
+
+    // γ = 0.999 needs about ln(1e-13)/ln(0.999) ≈ 3e4 sweeps: allowed, and V = 1/(1−γ) = 1000.
+    let fine = single(0.999);
+    let solution = value_iteration(&fine, &SolveOptions::default()).expect("converges");
+    assert!(
+        (solution.values[0] - 1000.0).abs() < 1e-5,
+        "{:?}",
+        solution.values
+    );
+    assert!(solution.iterations < 60_000);
+
+    // A limit below the estimate is refused after the first sweep too.
+    let tight = SolveOptions {
+        max_iterations: 100,
+        ..SolveOptions::default()
+    };
+    let error = value_iteration(&single(0.9), &tight).expect_err("needs about 240 sweeps");
+    assert!(
+        matches!(
+            error,
+            TabularError::NotConverged {
+                iterations: 1,
+                limit: 100,
+                ..
+            }
+        ),
+        "{error:?}"
+    );
+}
+
+#[test]
+fn missing_actions_of_state_zero_is_a_shape_mismatch() {
+    let transitions = vec![vec![], vec![vec![0.0, 1.0]]];
+    let rewards = vec![vec![], vec![0.0]];
+    match FiniteMdp::new(0.9, &transitions, &rewards) {
+        Err(TabularError::ShapeMismatch {
+            location,
+            found,
+            expected,
+            ..
+        }) => {
+            assert_eq!(location, "transitions[0]");
+            assert_eq!((found, expected), (0, 1));
+        }
+        other => panic!("expected ShapeMismatch, got {other:?}"),
+    }
+    let none: Vec<Vec<Vec<f64>>> = vec![vec![], vec![]];
+    let no_rewards: Vec<Vec<f64>> = vec![vec![], vec![]];
+    assert!(matches!(
+        FiniteMdp::new(0.9, &none, &no_rewards),
+        Err(TabularError::NoActions)
+    ));
+}
+
+#[test]
+fn bench_checks_the_largest_delay_before_any_run() {
+    let config = BenchConfig {
+        states: 4,
+        actions: 2,
+        min_delay: 0,
+        max_delay: 30,
+        ..BenchConfig::default()
+    };
+    let start = Instant::now();
+    let result = run_bench(&config);
+    assert!(
+        matches!(result, Err(TabularError::TooLarge { delay: 30, .. })),
+        "{result:?}"
+    );
+    assert!(start.elapsed() < Duration::from_secs(2));
+}
+
+#[derive(Parser, Debug)]
+struct TabularBenchCli {
+    #[command(flatten)]
+    args: TabularBenchArgs,
+}
+
+#[test]
+fn bench_cli_reports_an_unwritable_plot_path() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let blocker = dir.path().join("not-a-directory");
+    std::fs::write(&blocker, "x").expect("write file");
+    let out = blocker.join("plot.svg");
+    let out = out.to_str().expect("UTF-8 path").to_string();
+    let cli = TabularBenchCli::try_parse_from([
+        "tabular-bench",
+        "--states",
+        "3",
+        "--min-delay",
+        "0",
+        "--max-delay",
+        "1",
+        "--seeds",
+        "1",
+        "--max-samples",
+        "2000",
+        "--check-every",
+        "500",
+        "--tolerance",
+        "0.5",
+        "--json",
+        "--out",
+        out.as_str(),
+    ])
+    .expect("valid arguments");
+    let error = run_tabular_bench(&cli.args).expect_err("unwritable plot path");
+    assert!(
+        matches!(
+            error.downcast_ref::<TabularError>(),
+            Some(TabularError::Plot { .. })
+        ),
+        "{error}"
+    );
 }

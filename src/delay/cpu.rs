@@ -7,6 +7,7 @@ use super::layout::{
 use super::records::{RecordBatch, StepInput};
 use super::warmup::WarmupFiller;
 use super::{DelayConfig, DelayError};
+use crate::snapshot::{SnapshotError, read_section, write_section};
 
 /// The delay layer on the CPU: per copy, a ring of the last 2Δ + 3 steps `(s_τ, a_τ, r_τ)`.
 pub struct CpuDelayLayer {
@@ -199,6 +200,36 @@ impl CpuDelayLayer {
         )?;
         self.warmup
             .fill(actions, self.ready.iter().map(|&r| r != 0));
+        Ok(())
+    }
+
+    /// Writes the layer's state (counters, rings, outputs, warm-up random stream).
+    pub fn save(&self, out: &mut impl std::io::Write) -> Result<(), SnapshotError> {
+        write_section(out, &self.counters)?;
+        write_section(out, &self.ring)?;
+        write_section(out, &self.augmented)?;
+        write_section(out, &self.ready)?;
+        write_section(out, &self.records.counts)?;
+        write_section(out, &self.records.meta)?;
+        write_section(out, &self.records.data)?;
+        let rng = serde_json::to_vec(self.warmup.rng()).map_err(std::io::Error::other)?;
+        write_section(out, &rng)
+    }
+
+    /// Restores what [`CpuDelayLayer::save`] wrote for a layer of the same layout.
+    pub fn load(&mut self, input: &mut impl std::io::Read) -> Result<(), SnapshotError> {
+        read_section(input, "delay counters", &mut self.counters)?;
+        read_section(input, "delay ring", &mut self.ring)?;
+        read_section(input, "augmented states", &mut self.augmented)?;
+        read_section(input, "ready flags", &mut self.ready)?;
+        read_section(input, "record counts", &mut self.records.counts)?;
+        read_section(input, "record metadata", &mut self.records.meta)?;
+        read_section(input, "record data", &mut self.records.data)?;
+        let mut len = [0u8; 8];
+        input.read_exact(&mut len)?;
+        let mut rng = vec![0u8; u64::from_le_bytes(len) as usize];
+        input.read_exact(&mut rng)?;
+        *self.warmup.rng_mut() = serde_json::from_slice(&rng).map_err(std::io::Error::other)?;
         Ok(())
     }
 

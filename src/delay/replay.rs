@@ -6,6 +6,7 @@ use rand::Rng;
 use super::cpu::Transitions;
 use super::layout::{DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED};
 use super::records::RecordBatch;
+use crate::snapshot::{SnapshotError, read_section, write_section};
 
 /// The default capacity, in steps (SPEC §3).
 pub const DEFAULT_CAPACITY: usize = 1_000_000;
@@ -31,7 +32,8 @@ pub enum ReplayError {
 }
 
 /// One stored step of one copy.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 struct StepMeta {
     episode: u32,
     tau: u32,
@@ -84,6 +86,29 @@ impl ReplayStore {
     pub fn verbatim_bytes_per_step(&self) -> usize {
         (2 * self.layout.augmented_dim() + 2 * self.layout.obs_dim + self.layout.act_dim + 2)
             * size_of::<f32>()
+    }
+
+    /// Writes every stored step.
+    pub fn save(&self, out: &mut impl std::io::Write) -> Result<(), SnapshotError> {
+        let head: Vec<u64> = self.head.iter().map(|&h| h as u64).collect();
+        let filled: Vec<u64> = self.filled.iter().map(|&f| f as u64).collect();
+        write_section(out, &head)?;
+        write_section(out, &filled)?;
+        write_section(out, &self.meta)?;
+        write_section(out, &self.data)
+    }
+
+    /// Restores what [`ReplayStore::save`] wrote for a store of the same layout and capacity.
+    pub fn load(&mut self, input: &mut impl std::io::Read) -> Result<(), SnapshotError> {
+        let mut head = vec![0u64; self.head.len()];
+        let mut filled = vec![0u64; self.filled.len()];
+        read_section(input, "replay heads", &mut head)?;
+        read_section(input, "replay fill counts", &mut filled)?;
+        read_section(input, "replay metadata", &mut self.meta)?;
+        read_section(input, "replay steps", &mut self.data)?;
+        self.head = head.into_iter().map(|h| h as usize).collect();
+        self.filled = filled.into_iter().map(|f| f as usize).collect();
+        Ok(())
     }
 
     /// Steps held (context and final states included).

@@ -22,6 +22,14 @@ impl WarmupFiller {
         }
     }
 
+    pub fn rng(&self) -> &ChaCha8Rng {
+        &self.rng
+    }
+
+    pub fn rng_mut(&mut self) -> &mut ChaCha8Rng {
+        &mut self.rng
+    }
+
     /// Overwrites the rows of `actions` (`[N, act_dim]`) whose `ready` flag is 0.
     pub fn fill(&mut self, actions: &mut [f32], ready: impl Iterator<Item = bool>) {
         let act = self.low.len();

@@ -61,7 +61,89 @@ pub struct BatchedEnv {
     episode_lengths: Vec<u32>,
 }
 
+/// Everything [`BatchedEnv::restore`] needs to continue a batch exactly.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct BatchSnapshot {
+    pub task: TaskName,
+    pub envs: Vec<super::env::EnvSnapshot>,
+    pub rngs: Vec<ChaCha8Rng>,
+    pub running_returns: Vec<f64>,
+    pub observations: Vec<f32>,
+    pub final_observations: Vec<f32>,
+    pub rewards: Vec<f32>,
+    pub terminated: Vec<u32>,
+    pub truncated: Vec<u32>,
+    pub episode_returns: Vec<f32>,
+    pub episode_lengths: Vec<u32>,
+}
+
 impl BatchedEnv {
+    /// The state of every copy and of the step outputs.
+    pub fn snapshot(&self) -> BatchSnapshot {
+        BatchSnapshot {
+            task: self.task(),
+            envs: self.copies.iter().map(|c| c.env.snapshot()).collect(),
+            rngs: self.copies.iter().map(|c| c.rng.clone()).collect(),
+            running_returns: self.copies.iter().map(|c| c.episode_return).collect(),
+            observations: self.observations.clone(),
+            final_observations: self.final_observations.clone(),
+            rewards: self.rewards.clone(),
+            terminated: self.terminated.clone(),
+            truncated: self.truncated.clone(),
+            episode_returns: self.episode_returns.clone(),
+            episode_lengths: self.episode_lengths.clone(),
+        }
+    }
+
+    /// Continues from a [`BatchedEnv::snapshot`] of a batch of the same task and size.
+    pub fn restore(&mut self, snapshot: &BatchSnapshot) -> Result<(), SimError> {
+        let n = self.copies.len();
+        if snapshot.task != self.task() {
+            return Err(SimError::Snapshot(format!(
+                "it is of task {}, this batch runs {}",
+                snapshot.task,
+                self.task()
+            )));
+        }
+        let same_sizes = [
+            snapshot.envs.len(),
+            snapshot.rngs.len(),
+            snapshot.running_returns.len(),
+            snapshot.rewards.len(),
+        ]
+        .iter()
+        .all(|&len| len == n)
+            && snapshot.observations.len() == self.observations.len();
+        if !same_sizes {
+            return Err(SimError::Snapshot(format!(
+                "it holds {} copies, this batch has {n}",
+                snapshot.envs.len()
+            )));
+        }
+        for (i, copy) in self.copies.iter_mut().enumerate() {
+            copy.env.restore(&snapshot.envs[i])?;
+            copy.rng = snapshot.rngs[i].clone();
+            copy.episode_return = snapshot.running_returns[i];
+            let obs_dim = copy.obs.len();
+            for (o, v) in copy
+                .obs
+                .iter_mut()
+                .zip(&snapshot.observations[i * obs_dim..(i + 1) * obs_dim])
+            {
+                *o = f64::from(*v);
+            }
+        }
+        self.observations.clone_from(&snapshot.observations);
+        self.final_observations
+            .clone_from(&snapshot.final_observations);
+        self.rewards.clone_from(&snapshot.rewards);
+        self.terminated.clone_from(&snapshot.terminated);
+        self.truncated.clone_from(&snapshot.truncated);
+        self.episode_returns.clone_from(&snapshot.episode_returns);
+        self.episode_lengths.clone_from(&snapshot.episode_lengths);
+        Ok(())
+    }
+
     pub fn new(config: &BatchConfig) -> Result<BatchedEnv, SimError> {
         if config.envs == 0 {
             return Err(SimError::TooSmall {

@@ -30,18 +30,35 @@ pub struct Env {
     data: SimData,
     /// Steps since the last reset (Gymnasium's `TimeLimit` counter).
     elapsed: u32,
+    /// The reward's forward coordinate as of the last step or reset (read from MuJoCo's
+    /// derived quantities, which a restored state does not carry).
+    progress: f64,
 }
+
+/// Everything that determines a copy's future: MuJoCo's integration state
+/// (`mjSTATE_INTEGRATION`, warm start included) and the wrapper's counters.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EnvSnapshot {
+    pub physics: Vec<f64>,
+    pub elapsed: u32,
+    pub progress: f64,
+}
+
+const INTEGRATION_STATE: u32 = mujoco_rs::prelude::MjtState::mjSTATE_INTEGRATION as u32;
 
 impl Env {
     /// A copy in MuJoCo's initial state (`qpos0`, zero velocity), not yet reset with noise.
     pub fn new(model: Arc<TaskModel>) -> Env {
         let mut data = MjData::new(model.model.clone());
         data.forward();
-        Env {
+        let mut env = Env {
             model,
             data,
             elapsed: 0,
-        }
+            progress: 0.0,
+        };
+        env.progress = env.read_progress();
+        env
     }
 
     pub fn model(&self) -> &TaskModel {
@@ -93,6 +110,37 @@ impl Env {
         self.data.qvel_mut().copy_from_slice(qvel);
         self.data.forward();
         self.elapsed = 0;
+        self.progress = self.read_progress();
+    }
+
+    /// The state to continue from exactly, with [`Env::restore`].
+    pub fn snapshot(&self) -> EnvSnapshot {
+        EnvSnapshot {
+            physics: self.data.state(INTEGRATION_STATE).into_vec(),
+            elapsed: self.elapsed,
+            progress: self.progress,
+        }
+    }
+
+    /// Continues from a [`Env::snapshot`] of a copy of the same task.
+    pub fn restore(&mut self, snapshot: &EnvSnapshot) -> Result<(), SimError> {
+        let expected = self.model.model.state_size(INTEGRATION_STATE);
+        if snapshot.physics.len() != expected {
+            return Err(SimError::WrongLength {
+                what: "a saved physics state",
+                found: snapshot.physics.len(),
+                expected,
+            });
+        }
+        self.data
+            .set_state(&snapshot.physics, INTEGRATION_STATE)
+            .map_err(|e| SimError::LoadFailed {
+                path: "a saved physics state".into(),
+                message: e.to_string(),
+            })?;
+        self.elapsed = snapshot.elapsed;
+        self.progress = snapshot.progress;
+        Ok(())
     }
 
     /// The task's observation of the current state.
@@ -105,13 +153,14 @@ impl Env {
     /// the control cost uses it as given, as in Gymnasium.
     pub fn step(&mut self, action: &[f64], obs: &mut [f64]) -> StepOutcome {
         let task = self.model.task;
-        let before = self.progress();
+        let before = self.progress;
         self.data.ctrl_mut().copy_from_slice(action);
         for _ in 0..task.frame_skip {
             self.data.step();
         }
         self.data.rne_post_constraint();
-        let velocity = (self.progress() - before) / self.model.dt;
+        self.progress = self.read_progress();
+        let velocity = (self.progress - before) / self.model.dt;
         let ctrl_cost = task.ctrl_cost_weight * action.iter().map(|a| a * a).sum::<f64>();
         let reward = task.forward_weight * velocity + task.healthy_reward - ctrl_cost;
         self.observe(obs);
@@ -124,7 +173,7 @@ impl Env {
     }
 
     /// The coordinate whose change per `dt` is the forward velocity of the reward.
-    fn progress(&self) -> f64 {
+    fn read_progress(&self) -> f64 {
         let m = &self.model;
         match m.task.progress {
             Progress::None => 0.0,

@@ -5,8 +5,8 @@ mod batch;
 mod env;
 mod model;
 
-pub use batch::{BatchConfig, BatchedEnv, actuator_noise, executed_action};
-pub use env::{Env, StepOutcome};
+pub use batch::{BatchConfig, BatchSnapshot, BatchedEnv, actuator_noise, executed_action};
+pub use env::{Env, EnvSnapshot, StepOutcome};
 pub use model::{TaskModel, assets_dir};
 
 /// Gymnasium's `TimeLimit` for every benchmark task.
@@ -55,6 +55,8 @@ pub enum SimError {
         found: f64,
         min: f64,
     },
+    #[error("cannot continue from the saved simulation state: {0}")]
+    Snapshot(String),
     #[error("could not build a thread pool of {threads} threads: {message}")]
     ThreadPool { threads: usize, message: String },
 }

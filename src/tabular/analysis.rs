@@ -126,8 +126,9 @@ pub struct TabularReport {
     pub abstract_states: usize,
     /// `ζ = |X̄| / |X|`.
     pub compression_ratio: f64,
-    /// Prop. 3.5's bound `1/|A|^Δ` on `ζ` under deterministic dynamics.
-    pub compression_bound: f64,
+    /// Prop. 3.5's bound `1/|A|^Δ` on `ζ`, which holds under deterministic dynamics only:
+    /// `None` (JSON `null`) for a stochastic MDP.
+    pub compression_bound: Option<f64>,
     /// Whether the belief partition is reward-respecting (Prop. 3.3).
     pub reward_respecting: bool,
     /// Whether the belief partition has the stochastic substitution property (Prop. 3.3).
@@ -186,16 +187,18 @@ pub fn analyze(
             })
         }
     };
+    let deterministic = mdp.is_deterministic();
     Ok(TabularReport {
         states: mdp.num_states(),
         actions: mdp.num_actions(),
         delay,
         gamma: mdp.gamma(),
-        deterministic: mdp.is_deterministic(),
+        deterministic,
         augmented_states: augmented.num_states(),
         abstract_states: exact.num_blocks(),
         compression_ratio: exact.compression_ratio(),
-        compression_bound: (mdp.num_actions() as f64).powf(delay as f64).recip(),
+        compression_bound: deterministic
+            .then(|| (mdp.num_actions() as f64).powf(delay as f64).recip()),
         reward_respecting: check.reward_respecting,
         ssp: check.ssp,
         max_reward_difference: check.max_reward_difference,
@@ -239,7 +242,10 @@ impl TabularReport {
             ("compression ratio", format_number(self.compression_ratio)),
             (
                 "Prop. 3.5 bound 1/|A|^delay",
-                format_number(self.compression_bound),
+                self.compression_bound.map_or_else(
+                    || "n/a (stochastic dynamics; Prop. 3.5 needs deterministic P)".to_string(),
+                    format_number,
+                ),
             ),
             ("reward-respecting", yes_no(self.reward_respecting)),
             ("SSP", yes_no(self.ssp)),

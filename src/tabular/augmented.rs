@@ -45,6 +45,52 @@ fn augmented_size(states: usize, actions: usize, delay: usize) -> u128 {
     size
 }
 
+/// Checks, before anything is built or generated, that the augmented MDP of a base MDP with
+/// `states` states and `actions` actions at delay `delay` is within `limits`, and that its tables
+/// can be addressed: `|X| = |S|·|A|^Δ`, the `|X|·|A|` belief-expected rewards and the `|S|·|A|`
+/// transition rows of the base MDP. Returns `|X|`.
+///
+/// # Errors
+/// [`TabularError::TooLarge`] when `|X|` exceeds `limits.max_augmented_states`,
+/// [`TabularError::TableTooLarge`] when a table size overflows `usize`.
+pub(crate) fn check_augmented_size(
+    states: usize,
+    actions: usize,
+    delay: usize,
+    limits: &SizeLimits,
+) -> Result<usize, TabularError> {
+    let size = augmented_size(states, actions, delay);
+    if size > limits.max_augmented_states as u128 {
+        return Err(TabularError::TooLarge {
+            states,
+            actions,
+            delay,
+            augmented_states: size,
+            limit: limits.max_augmented_states,
+        });
+    }
+    // `size <= limit <= usize::MAX`, so this conversion is exact.
+    let size = size as usize;
+    table_entries("augmented reward table |X|*|A|", size, actions)?;
+    table_entries("transition rows |S|*|A|", states, actions)?;
+    Ok(size)
+}
+
+/// `rows·actions` as a table size, or [`TabularError::TableTooLarge`] on overflow.
+pub(crate) fn table_entries(
+    table: &'static str,
+    rows: usize,
+    actions: usize,
+) -> Result<usize, TabularError> {
+    rows.checked_mul(actions)
+        .ok_or(TabularError::TableTooLarge {
+            table,
+            states: rows,
+            actions,
+            entries: rows as u128 * actions as u128,
+        })
+}
+
 /// One step of the belief recursion: `b'(s') = Σ_s b(s)·P(s'|s, a)`.
 fn push_forward(
     base: &FiniteMdp,
@@ -77,21 +123,13 @@ impl AugmentedMdp {
     /// Builds `M_Δ` for the delayed MDP `(base, delay)`, computing `R_Δ` from the beliefs.
     ///
     /// # Errors
-    /// [`TabularError::TooLarge`] when `|S|·|A|^Δ` exceeds `limits.max_augmented_states`.
+    /// [`TabularError::TooLarge`] when `|S|·|A|^Δ` exceeds `limits.max_augmented_states`,
+    /// [`TabularError::TableTooLarge`] when the `|X|·|A|` reward table overflows or cannot be
+    /// allocated.
     pub fn new(base: &FiniteMdp, delay: usize, limits: &SizeLimits) -> Result<Self, TabularError> {
         let (states, actions) = (base.num_states(), base.num_actions());
-        let size = augmented_size(states, actions, delay);
-        if size > limits.max_augmented_states as u128 {
-            return Err(TabularError::TooLarge {
-                states,
-                actions,
-                delay,
-                augmented_states: size,
-                limit: limits.max_augmented_states,
-            });
-        }
-        // `size <= limit <= usize::MAX`, so these conversions are exact.
-        let histories = (size / states as u128) as usize;
+        let size = check_augmented_size(states, actions, delay, limits)?;
+        let histories = size / states;
         let oldest_place = if delay == 0 { 1 } else { histories / actions };
         let mut model = Self {
             base: base.clone(),
@@ -100,7 +138,17 @@ impl AugmentedMdp {
             oldest_place,
             rewards: Vec::new(),
         };
-        let mut rewards = vec![0.0; size as usize * actions];
+        let entries = table_entries("augmented reward table |X|*|A|", size, actions)?;
+        let mut rewards: Vec<f64> = Vec::new();
+        rewards
+            .try_reserve_exact(entries)
+            .map_err(|_| TabularError::TableTooLarge {
+                table: "augmented reward table |X|*|A|",
+                states: size,
+                actions,
+                entries: entries as u128,
+            })?;
+        rewards.resize(entries, 0.0);
         model.for_each_belief(|x, belief| {
             let slots = &mut rewards[x * actions..(x + 1) * actions];
             for (action, slot) in slots.iter_mut().enumerate() {
@@ -122,11 +170,6 @@ impl AugmentedMdp {
     /// The delay `Δ`.
     pub fn delay(&self) -> usize {
         self.delay
-    }
-
-    /// `|A|^Δ`, the number of action histories per observed state.
-    pub fn num_histories(&self) -> usize {
-        self.histories
     }
 
     /// The index of `x = (state, actions[0], …, actions[Δ−1])`, actions oldest first.

@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::augmented::{AugmentedMdp, SizeLimits};
+use super::augmented::{AugmentedMdp, SizeLimits, check_augmented_size};
 use super::environment::DelayedEnv;
 use super::error::TabularError;
 use super::generate::{RandomMdpSpec, random_mdp};
@@ -86,7 +86,10 @@ impl BenchConfig {
                 accepted: "a finite number > 0".to_string(),
             });
         }
-        self.learning.validate()
+        self.learning.validate()?;
+        // The largest delay has the largest augmented MDP: refuse it before any run.
+        check_augmented_size(self.states, self.actions, self.max_delay, &self.limits)?;
+        Ok(())
     }
 }
 
@@ -266,8 +269,8 @@ fn samples_to_tolerance(
 /// Runs the experiment described in the module documentation.
 ///
 /// # Errors
-/// [`TabularError::InvalidParameter`] for bad settings, [`TabularError::TooLarge`] when a delay
-/// exceeds the size limit, and solver errors.
+/// [`TabularError::InvalidParameter`] for bad settings, [`TabularError::TooLarge`] when the
+/// largest delay exceeds the size limit (checked before any run), and solver errors.
 pub fn run_bench(config: &BenchConfig) -> Result<BenchReport, TabularError> {
     config.validate()?;
     let solve = SolveOptions::default();

@@ -14,16 +14,20 @@ use super::partition::{Partition, check_partition_size};
 use super::quotient::block_distribution;
 use super::sparse::{SparseAccumulator, max_abs_difference};
 
-/// Default tolerance of the checks: differences up to this size count as equal.
+/// Default tolerance of the checks. Reward differences up to `tolerance·max(1, max |R|)` count as
+/// equal (relative to the reward scale); block-transition probabilities, which lie in `[0, 1]`,
+/// are compared with the absolute `tolerance`.
 pub const CHECK_TOLERANCE: f64 = 1e-9;
 
 /// The outcome of [`check_homomorphism`] (with the identity action map, so the state-action
 /// blocks are `block × {a}`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct HomomorphismCheck {
-    /// `x ≡ x'` implies `R(x, a) = R(x', a)` for every action (appendix A, reward-respecting partition).
+    /// `x ≡ x'` implies `R(x, a) = R(x', a)` for every action (appendix A, reward-respecting
+    /// partition), up to `tolerance·max(1, max |R|)`.
     pub reward_respecting: bool,
-    /// `x ≡ x'` implies `P(G|x, a) = P(G|x', a)` for every block `G` and action (appendix A, stochastic substitution property).
+    /// `x ≡ x'` implies `P(G|x, a) = P(G|x', a)` for every block `G` and action (appendix A,
+    /// stochastic substitution property), up to the absolute `tolerance`.
     pub ssp: bool,
     /// Largest `|R(x, a) − R(x₀, a)|` over the members `x` of a block and its first member `x₀`.
     pub max_reward_difference: f64,
@@ -32,7 +36,8 @@ pub struct HomomorphismCheck {
 }
 
 /// Checks whether `partition` of `model`'s states is reward-respecting and has the SSP, treating
-/// differences up to `tolerance` as equal (see [`CHECK_TOLERANCE`]).
+/// reward differences up to `tolerance·max(1, max |R|)` and block-transition differences up to
+/// `tolerance` as equal (see [`CHECK_TOLERANCE`]).
 ///
 /// # Errors
 /// [`TabularError::ShapeMismatch`] when the partition does not cover the model's states,
@@ -71,8 +76,15 @@ pub fn check_homomorphism<M: TabularModel>(
             }
         }
     }
+    let mut max_abs_reward = 0.0f64;
+    for state in 0..model.num_states() {
+        for action in 0..model.num_actions() {
+            max_abs_reward = max_abs_reward.max(model.reward(state, action).abs());
+        }
+    }
+    let reward_tolerance = tolerance * max_abs_reward.max(1.0);
     Ok(HomomorphismCheck {
-        reward_respecting: max_reward_difference <= tolerance,
+        reward_respecting: max_reward_difference <= reward_tolerance,
         ssp: max_transition_difference <= tolerance,
         max_reward_difference,
         max_transition_difference,

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, anyhow};
 
 use super::analysis::{AnalysisOptions, analyze};
-use super::augmented::{DEFAULT_MAX_AUGMENTED_STATES, SizeLimits};
+use super::augmented::{DEFAULT_MAX_AUGMENTED_STATES, SizeLimits, check_augmented_size};
 use super::bench::{BenchConfig, run_bench};
 use super::generate::{RandomMdpSpec, random_mdp};
 use super::mdp::FiniteMdp;
@@ -125,6 +125,12 @@ pub struct TabularBenchArgs {
     pub json: bool,
 }
 
+fn size_limits(max_augmented_states: usize) -> SizeLimits {
+    SizeLimits {
+        max_augmented_states,
+    }
+}
+
 fn load_mdp(args: &TabularArgs) -> anyhow::Result<FiniteMdp> {
     if let Some(path) = &args.mdp {
         return FiniteMdp::from_json_file(path)
@@ -136,6 +142,14 @@ fn load_mdp(args: &TabularArgs) -> anyhow::Result<FiniteMdp> {
     let actions = args
         .actions
         .ok_or_else(|| anyhow!("--random needs --actions M (the number of actions, at least 1)"))?;
+    // Refuse an oversized augmented MDP before generating the base MDP, whose |S|·|A| rows alone
+    // can exhaust memory.
+    check_augmented_size(
+        states,
+        actions,
+        args.delay,
+        &size_limits(args.max_augmented_states),
+    )?;
     let spec = RandomMdpSpec {
         states,
         actions,
@@ -149,14 +163,13 @@ fn load_mdp(args: &TabularArgs) -> anyhow::Result<FiniteMdp> {
 /// Runs `dhrl tabular`.
 ///
 /// # Errors
-/// Invalid input (file, MDP, flags) or an augmented MDP above the size limit.
+/// Invalid input (file, MDP, flags) or an augmented MDP above the size limit (for `--random`,
+/// checked before the MDP is generated).
 pub fn run_tabular(args: &TabularArgs) -> anyhow::Result<()> {
     let mdp = load_mdp(args)?;
     let options = AnalysisOptions {
         epsilon: args.epsilon,
-        limits: SizeLimits {
-            max_augmented_states: args.max_augmented_states,
-        },
+        limits: size_limits(args.max_augmented_states),
         ..AnalysisOptions::default()
     };
     let report = analyze(&mdp, args.delay, &options)?;
@@ -171,7 +184,8 @@ pub fn run_tabular(args: &TabularArgs) -> anyhow::Result<()> {
 /// Runs `dhrl tabular-bench`.
 ///
 /// # Errors
-/// Invalid settings, an augmented MDP above the size limit, or an unwritable plot path.
+/// Invalid settings, an augmented MDP above the size limit (checked for the largest delay before
+/// any run), or an unwritable plot path (reported after the results are printed).
 pub fn run_tabular_bench(args: &TabularBenchArgs) -> anyhow::Result<()> {
     let config = BenchConfig {
         states: args.states,
@@ -187,17 +201,19 @@ pub fn run_tabular_bench(args: &TabularBenchArgs) -> anyhow::Result<()> {
             max_samples: args.max_samples,
             check_every: args.check_every,
         },
-        limits: SizeLimits {
-            max_augmented_states: args.max_augmented_states,
-        },
+        limits: size_limits(args.max_augmented_states),
     };
     let report = run_bench(&config)?;
-    write_bench_plot(&report, &args.out)?;
+    // Results first: an unwritable --out must not discard a finished experiment.
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
-        eprintln!("wrote {}", args.out.display());
     } else {
         print!("{}", report.to_table());
+    }
+    write_bench_plot(&report, &args.out)?;
+    if args.json {
+        eprintln!("wrote {}", args.out.display());
+    } else {
         println!("plot: {}", args.out.display());
     }
     Ok(())

@@ -112,6 +112,24 @@ pub enum TabularError {
         limit: usize,
     },
 
+    /// A table whose entry count follows from the sizes (the `|S|·|A|` transition rows of a
+    /// generated MDP, the `|X|·|A|` belief-expected rewards of an augmented MDP) overflows the
+    /// address space or cannot be allocated.
+    #[error(
+        "the {table} of {states} states and {actions} actions needs {entries} entries, more than \
+         this machine can address or allocate; accepted: fewer states or actions (or a lower delay)"
+    )]
+    TableTooLarge {
+        /// Which table, e.g. `transition rows |S|*|A|`.
+        table: &'static str,
+        /// Number of states (`|S|`, or `|X|` for augmented tables).
+        states: usize,
+        /// `|A|`.
+        actions: usize,
+        /// The number of entries the table would need, saturated at `u128::MAX`.
+        entries: u128,
+    },
+
     /// A numeric parameter (epsilon, a weight, a learning setting, …) is out of range.
     #[error("{name} = {value} is invalid; accepted: {accepted}")]
     InvalidParameter {
@@ -134,18 +152,31 @@ pub enum TabularError {
         bound: usize,
     },
 
-    /// An iterative solver hit its iteration limit.
+    /// An iterative solver stopped before reaching its tolerance. Each sweep shrinks the error by
+    /// the factor `γ`, so the sweeps needed grow like `1/(1−γ)`; the message names `γ` and the
+    /// estimate.
     #[error(
-        "{what} did not converge within {iterations} iterations (last change {residual:e}); \
-         accepted: a larger iteration limit or a looser tolerance"
+        "{what} did not converge: stopped after {iterations} of at most {limit} sweeps (last \
+         change {residual:e}); with gamma = {gamma} reaching the solver tolerance takes about \
+         {needed} sweeps, and {reason}; accepted: a smaller gamma (the discount factor of the \
+         MDP: each sweep only shrinks the error by the factor gamma), or, through the library, a \
+         looser SolveOptions::tolerance or a larger SolveOptions::max_iterations"
     )]
     NotConverged {
         /// Which solver.
         what: &'static str,
-        /// The iteration limit.
+        /// Sweeps performed.
         iterations: usize,
+        /// The sweep limit in force (see [`crate::tabular::SolveOptions`]).
+        limit: usize,
+        /// Sweeps the `γ`-contraction bound needs from the first sweep's change to the tolerance.
+        needed: usize,
+        /// The discount factor `γ`.
+        gamma: f64,
         /// The last sup-norm change between iterates.
         residual: f64,
+        /// Why the solver stopped, in words.
+        reason: &'static str,
     },
 
     /// The MDP JSON could not be parsed.

@@ -1,10 +1,16 @@
 //! Seeded random finite MDPs for `dhrl tabular --random` and the sample-complexity benchmark.
 
+use std::collections::TryReserveError;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::augmented::table_entries;
 use super::error::TabularError;
 use super::mdp::FiniteMdp;
+
+/// The table that [`random_mdp`] allocates, as named in its errors.
+const TABLE: &str = "transition rows |S|*|A|";
 
 /// What [`random_mdp`] generates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -25,9 +31,14 @@ pub struct RandomMdpSpec {
 /// A random MDP: for every `(s, a)` the reward is uniform in `[0, 1)` and the main next state is
 /// uniform over `S`; with `stochastic = p > 0`, mass `p` moves to another uniformly chosen state.
 ///
+/// The generator does not know the delay: callers that go on to build an augmented MDP should
+/// check its size first (as `dhrl tabular --random` does), so that an oversized request fails
+/// before any table is generated.
+///
 /// # Errors
-/// [`TabularError::NoStates`], [`TabularError::NoActions`], [`TabularError::InvalidGamma`] and
-/// [`TabularError::InvalidParameter`] for `p ∉ [0, 1]` or `p > 0` with a single state.
+/// [`TabularError::NoStates`], [`TabularError::NoActions`], [`TabularError::InvalidGamma`],
+/// [`TabularError::InvalidParameter`] for `p ∉ [0, 1]` or `p > 0` with a single state, and
+/// [`TabularError::TableTooLarge`] when the `|S|·|A|` rows overflow or cannot be allocated.
 pub fn random_mdp(spec: &RandomMdpSpec) -> Result<FiniteMdp, TabularError> {
     if spec.states == 0 {
         return Err(TabularError::NoStates);
@@ -50,10 +61,18 @@ pub fn random_mdp(spec: &RandomMdpSpec) -> Result<FiniteMdp, TabularError> {
                 .to_string(),
         });
     }
+    let pairs = table_entries(TABLE, spec.states, spec.actions)?;
+    let too_large = |_: TryReserveError| TabularError::TableTooLarge {
+        table: TABLE,
+        states: spec.states,
+        actions: spec.actions,
+        entries: pairs as u128,
+    };
+    let mut rows: Vec<Vec<(usize, f64)>> = Vec::new();
+    rows.try_reserve_exact(pairs).map_err(too_large)?;
+    let mut rewards: Vec<f64> = Vec::new();
+    rewards.try_reserve_exact(pairs).map_err(too_large)?;
     let mut rng = ChaCha8Rng::seed_from_u64(spec.seed);
-    let pairs = spec.states * spec.actions;
-    let mut rows = Vec::with_capacity(pairs);
-    let mut rewards = Vec::with_capacity(pairs);
     for _ in 0..pairs {
         rewards.push(rng.random::<f64>());
         let main = rng.random_range(0..spec.states);

@@ -116,7 +116,18 @@ impl FiniteMdp {
         }
         let num_actions = transitions[0].len();
         if num_actions == 0 {
-            return Err(TabularError::NoActions);
+            // Only "no actions" when no state lists any; otherwise state 0 is the odd one out.
+            return Err(
+                match transitions.iter().map(Vec::len).find(|&count| count > 0) {
+                    None => TabularError::NoActions,
+                    Some(expected) => TabularError::ShapeMismatch {
+                        location: "transitions[0]".to_string(),
+                        found: 0,
+                        expected,
+                        unit: "actions (a later state lists that many)",
+                    },
+                },
+            );
         }
         for (state, per_action) in transitions.iter().enumerate() {
             if per_action.len() != num_actions {

@@ -104,11 +104,6 @@ impl QTable {
         self.values[state * self.num_actions + action]
     }
 
-    /// All values, `values()[z·|A| + a] = Q(z, a)`.
-    pub fn values(&self) -> &[f64] {
-        &self.values
-    }
-
     fn row(&self, state: usize) -> &[f64] {
         &self.values[state * self.num_actions..(state + 1) * self.num_actions]
     }

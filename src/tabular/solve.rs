@@ -4,6 +4,14 @@
 //! Both iterate the Bellman operator (a `γ`-contraction) and stop once the a-posteriori error
 //! bound `γ/(1−γ)·‖V_{k+1} − V_k‖_∞` is at most `tolerance·max(1, ‖V_{k+1}‖_∞)`, so the returned
 //! values are within that distance of the exact fixed point.
+//!
+//! # Sweep limit
+//! The change of sweep `k` is at most `γ^{k−1}·c₁`, where `c₁` is the change of the first sweep,
+//! so the stopping rule holds after at most
+//! `n = ⌈ln(tolerance·(1−γ)/c₁) / ln γ⌉` sweeps (the sweeps "needed"). After the first sweep the
+//! solvers compute `n`; when `n` exceeds [`SolveOptions::max_iterations`] they stop at once with
+//! [`TabularError::NotConverged`] (naming `γ` and `n`) instead of spending the whole limit, and
+//! otherwise they allow `min(max_iterations, 2n + 16)` sweeps, the slack covering rounding noise.
 
 use super::error::TabularError;
 use super::model::TabularModel;
@@ -13,7 +21,8 @@ use super::model::TabularModel;
 pub struct SolveOptions {
     /// Relative accuracy of the returned values (see the module documentation).
     pub tolerance: f64,
-    /// Iteration limit; reaching it is a [`TabularError::NotConverged`] error.
+    /// Largest number of sweeps; a problem whose contraction bound needs more (see the module
+    /// documentation) is a [`TabularError::NotConverged`] error after the first sweep.
     pub max_iterations: usize,
 }
 
@@ -70,6 +79,86 @@ fn converged(change: f64, scale: f64, gamma: f64, tolerance: f64) -> bool {
     gamma * change <= tolerance * scale.max(1.0) * (1.0 - gamma)
 }
 
+/// `⌈ln(tolerance·(1−γ)/c₁) / ln γ⌉`, at least 1: the sweeps after which the `γ`-contraction
+/// guarantees the stopping rule, given the first sweep's change `c₁` (module documentation).
+fn sweeps_needed(gamma: f64, tolerance: f64, first_change: f64) -> usize {
+    if gamma <= 0.0 || first_change <= 0.0 || !first_change.is_finite() {
+        return 1;
+    }
+    let ratio = tolerance * (1.0 - gamma) / first_change;
+    if ratio >= 1.0 {
+        return 1;
+    }
+    // ln γ = ln(1 − (1−γ)), accurate for γ close to one.
+    let log_gamma = (-(1.0 - gamma)).ln_1p();
+    let sweeps = (ratio.ln() / log_gamma).ceil();
+    // `as` saturates, so an astronomically large estimate becomes `usize::MAX`.
+    (sweeps as usize).max(1)
+}
+
+/// The sweep limit of one solver run (module documentation, "Sweep limit").
+struct SweepLimit {
+    what: &'static str,
+    gamma: f64,
+    tolerance: f64,
+    max_iterations: usize,
+    limit: usize,
+    needed: usize,
+}
+
+impl SweepLimit {
+    fn new<M: TabularModel>(what: &'static str, model: &M, options: &SolveOptions) -> Self {
+        Self {
+            what,
+            gamma: model.gamma(),
+            tolerance: options.tolerance,
+            max_iterations: options.max_iterations,
+            limit: options.max_iterations,
+            needed: 0,
+        }
+    }
+
+    fn error(&self, iterations: usize, residual: f64, reason: &'static str) -> TabularError {
+        TabularError::NotConverged {
+            what: self.what,
+            iterations,
+            limit: self.limit,
+            needed: self.needed,
+            gamma: self.gamma,
+            residual,
+            reason,
+        }
+    }
+
+    /// Called after sweep number `sweep` (from 1) did not meet the stopping rule; an error stops
+    /// the solver.
+    fn after_sweep(&mut self, sweep: usize, change: f64) -> Result<(), TabularError> {
+        if sweep == 1 {
+            self.needed = sweeps_needed(self.gamma, self.tolerance, change);
+            if self.needed > self.max_iterations {
+                return Err(self.error(
+                    sweep,
+                    change,
+                    "that is more than the sweep limit, so the solver stopped at once",
+                ));
+            }
+            self.limit = self
+                .max_iterations
+                .min(self.needed.saturating_mul(2).saturating_add(16));
+        }
+        if sweep >= self.limit {
+            let reason = if self.limit == self.max_iterations {
+                "the sweep limit was reached"
+            } else {
+                "rounding noise kept the change above the stopping threshold (the tolerance is \
+                 too tight for double precision at this gamma)"
+            };
+            return Err(self.error(sweep, change, reason));
+        }
+        Ok(())
+    }
+}
+
 /// The greedy policy of `values`, first maximising action on ties.
 pub(crate) fn greedy_policy<M: TabularModel>(model: &M, values: &[f64]) -> Vec<usize> {
     (0..model.num_states())
@@ -92,7 +181,7 @@ pub(crate) fn greedy_policy<M: TabularModel>(model: &M, values: &[f64]) -> Vec<u
 ///
 /// # Errors
 /// [`TabularError::InvalidParameter`] for bad options, [`TabularError::NotConverged`] when the
-/// iteration limit is reached.
+/// sweep limit is reached or `γ` needs more sweeps than it allows (module documentation).
 pub fn value_iteration<M: TabularModel>(
     model: &M,
     options: &SolveOptions,
@@ -102,9 +191,9 @@ pub fn value_iteration<M: TabularModel>(
     let gamma = model.gamma();
     let mut values = vec![0.0; n];
     let mut next = vec![0.0; n];
-    let mut change = f64::INFINITY;
-    for iteration in 1..=options.max_iterations {
-        change = 0.0;
+    let mut limit = SweepLimit::new("value iteration", model, options);
+    for iteration in 1.. {
+        let mut change = 0.0f64;
         let mut scale = 0.0f64;
         for (state, slot) in next.iter_mut().enumerate() {
             let best = (0..model.num_actions())
@@ -123,12 +212,9 @@ pub fn value_iteration<M: TabularModel>(
                 iterations: iteration,
             });
         }
+        limit.after_sweep(iteration, change)?;
     }
-    Err(TabularError::NotConverged {
-        what: "value iteration",
-        iterations: options.max_iterations,
-        residual: change,
-    })
+    unreachable!("the sweep limit ends the loop")
 }
 
 /// Iterative policy evaluation of a deterministic policy (`policy[x]` is the action in `x`),
@@ -137,7 +223,8 @@ pub fn value_iteration<M: TabularModel>(
 /// # Errors
 /// [`TabularError::ShapeMismatch`] for a policy or start vector of the wrong length,
 /// [`TabularError::IndexOutOfRange`] for an action `≥ |A|`, [`TabularError::InvalidParameter`] for
-/// bad options and [`TabularError::NotConverged`] when the iteration limit is reached.
+/// bad options and [`TabularError::NotConverged`] when the sweep limit is reached or `γ` needs
+/// more sweeps than it allows (module documentation).
 pub fn evaluate_policy<M: TabularModel>(
     model: &M,
     policy: &[usize],
@@ -175,9 +262,9 @@ pub fn evaluate_policy<M: TabularModel>(
     };
     let gamma = model.gamma();
     let mut next = vec![0.0; n];
-    let mut change = f64::INFINITY;
-    for _ in 0..options.max_iterations {
-        change = 0.0;
+    let mut limit = SweepLimit::new("policy evaluation", model, options);
+    for sweep in 1.. {
+        let mut change = 0.0f64;
         let mut scale = 0.0f64;
         for (state, slot) in next.iter_mut().enumerate() {
             let value = backup(model, &values, state, policy[state]);
@@ -189,10 +276,7 @@ pub fn evaluate_policy<M: TabularModel>(
         if converged(change, scale, gamma, options.tolerance) {
             return Ok(values);
         }
+        limit.after_sweep(sweep, change)?;
     }
-    Err(TabularError::NotConverged {
-        what: "policy evaluation",
-        iterations: options.max_iterations,
-        residual: change,
-    })
+    unreachable!("the sweep limit ends the loop")
 }

@@ -1,0 +1,386 @@
+//! Soft Actor-Critic (Haarnoja et al. 2018) in burn: twin critics with Polyak-averaged targets
+//! kept off the autodiff graph, a tanh-squashed Gaussian actor, and a learned temperature.
+//!
+//! [`SacLearner`] is the algorithm on an abstract input (whatever the policy conditions on);
+//! [`SacAgent`] chooses that input from a transition. `sac` below is the delay-free reference
+//! on the true state; `naive_sac.rs` and `augmented_sac.rs` are the two delayed baselines.
+//! BPQL and D2HPG reuse [`SacLearner`] for their delay-free parts.
+use std::path::Path;
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::prelude::*;
+
+use super::{ActMode, Agent, AgentSpec, Hyper};
+use crate::delay::Transitions;
+use crate::learn::{
+    ActionScale, Devices, GaussianPolicy, LearnError, Noise, Temperature, TwinQ, actor_loss,
+    column, critic_loss, critic_target, matrix, polyak, temperature_loss, to_vec,
+};
+
+/// Losses and temperature of one update.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SacStats {
+    pub critic_loss: f64,
+    pub actor_loss: f64,
+    pub alpha: f64,
+    pub alpha_loss: f64,
+}
+
+/// Forces burn's lazily initialised parameters to draw their values now, in declaration
+/// order, so that a seed fixes them.
+pub(crate) fn materialize<M: Module>(module: &M) {
+    struct Touch;
+    impl ModuleVisitor for Touch {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            let _ = param.val();
+        }
+    }
+    module.visit(&mut Touch);
+}
+
+pub(crate) fn adam(hyper: &Hyper) -> ModuleOptimizer {
+    AdamConfig::new()
+        .with_epsilon(hyper.adam_epsilon as f32)
+        .init()
+}
+
+fn save_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
+    LearnError::Save {
+        what: what.display().to_string(),
+        message: e.to_string(),
+    }
+}
+
+fn load_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
+    LearnError::Load {
+        what: what.display().to_string(),
+        message: e.to_string(),
+    }
+}
+
+/// SAC on inputs of a fixed width.
+pub struct SacLearner {
+    pub actor: GaussianPolicy,
+    pub critic: TwinQ,
+    /// Polyak-averaged copy of `critic` on the plain device: never on an autodiff graph.
+    pub target: TwinQ,
+    pub temperature: Temperature,
+    actor_opt: ModuleOptimizer,
+    critic_opt: ModuleOptimizer,
+    temperature_opt: ModuleOptimizer,
+    pub scale: ActionScale,
+    hyper: Hyper,
+    /// `H̄ = −dim(A)`.
+    target_entropy: f64,
+    pub devices: Devices,
+    pub noise: Noise,
+    act_dim: usize,
+}
+
+impl SacLearner {
+    pub fn new(
+        input_dim: usize,
+        spec: &AgentSpec,
+        hyper: &Hyper,
+        devices: &Devices,
+        seed: u64,
+    ) -> SacLearner {
+        let actor = GaussianPolicy::new(input_dim, spec.act_dim, &devices.train);
+        materialize(&actor);
+        let critic = TwinQ::new(input_dim, spec.act_dim, &devices.train);
+        materialize(&critic);
+        SacLearner {
+            target: critic.valid(),
+            actor,
+            critic,
+            temperature: Temperature::new(hyper.initial_alpha, &devices.train),
+            actor_opt: adam(hyper),
+            critic_opt: adam(hyper),
+            temperature_opt: adam(hyper),
+            scale: ActionScale::new(&spec.action_low, &spec.action_high, &devices.plain),
+            hyper: *hyper,
+            target_entropy: -(spec.act_dim as f64),
+            devices: devices.clone(),
+            noise: Noise::new(seed ^ 0x5AC),
+            act_dim: spec.act_dim,
+        }
+    }
+
+    /// A sampled action `a ~ π(·|input)` per row, from the current actor (no graph).
+    pub fn explore(&mut self, input: Tensor<2>) -> Tensor<2> {
+        let rows = input.dims()[0];
+        let eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
+        self.actor.valid().sample(input, eps, &self.scale).action
+    }
+
+    /// The deterministic action `tanh(μ)` per row.
+    pub fn exploit(&self, input: Tensor<2>) -> Tensor<2> {
+        self.actor.valid().mode(input, &self.scale)
+    }
+
+    /// One update of critics, actor, temperature and target critics. Inputs are `[B, ·]`
+    /// tensors on the plain device; `done` is 1 where the MDP terminated.
+    pub fn update(
+        &mut self,
+        input: Tensor<2>,
+        action: Tensor<2>,
+        reward: Tensor<2>,
+        next_input: Tensor<2>,
+        done: Tensor<2>,
+    ) -> SacStats {
+        let (batch, plain) = (input.dims()[0], self.devices.plain.clone());
+        let (gamma, lr) = (self.hyper.gamma, self.hyper.learning_rate);
+        let alpha = self.temperature.alpha();
+
+        // Critics (Eq. 3, 5): y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|s')), a' ~ π(·|s').
+        let next_eps = self.noise.normal(batch, self.act_dim, &plain);
+        let next = self
+            .actor
+            .valid()
+            .sample(next_input.clone(), next_eps, &self.scale);
+        let next_q = self.target.min(next_input, next.action);
+        let y = critic_target(reward, done, next_q, next.log_prob, alpha, gamma);
+        let q1 = self.critic.q1.forward(input.clone(), action.clone());
+        let q2 = self.critic.q2.forward(input.clone(), action);
+        let loss_q = critic_loss(q1, q2, y);
+        let critic_loss_value = f64::from(loss_q.clone().inner().into_scalar::<f32>());
+        let grads = GradientsParams::from_grads(loss_q.backward(), &self.critic);
+        self.critic = self.critic_opt.step(lr, self.critic.clone(), grads);
+
+        // Actor (Eq. 7): α log π(a|s) − min Q(s, a), a ~ π(·|s), critics held fixed.
+        let eps = self.noise.normal(batch, self.act_dim, &plain);
+        let pi = self.actor.sample(input.clone(), eps, &self.scale);
+        let mean_log_prob = f64::from(pi.log_prob.clone().inner().mean().into_scalar::<f32>());
+        let q = self.critic.valid().min(input, pi.action);
+        let loss_pi = actor_loss(pi.log_prob, q, alpha);
+        let actor_loss_value = f64::from(loss_pi.clone().inner().into_scalar::<f32>());
+        let grads = GradientsParams::from_grads(loss_pi.backward(), &self.actor);
+        self.actor = self.actor_opt.step(lr, self.actor.clone(), grads);
+
+        // Temperature (Eq. 18): −α(log π + H̄), toward the target entropy.
+        let mut alpha_loss_value = 0.0;
+        if self.hyper.autotune_alpha {
+            let loss_alpha = temperature_loss(
+                self.temperature.log_alpha.val(),
+                mean_log_prob,
+                self.target_entropy,
+            );
+            alpha_loss_value = f64::from(loss_alpha.clone().inner().into_scalar::<f32>());
+            let grads = GradientsParams::from_grads(loss_alpha.backward(), &self.temperature);
+            self.temperature = self
+                .temperature_opt
+                .step(lr, self.temperature.clone(), grads);
+        }
+
+        // Targets: θ̄ ← τθ + (1 − τ)θ̄.
+        self.target = polyak(self.target.clone(), &self.critic, self.hyper.tau);
+        SacStats {
+            critic_loss: critic_loss_value,
+            actor_loss: actor_loss_value,
+            alpha,
+            alpha_loss: alpha_loss_value,
+        }
+    }
+
+    /// Saves networks, optimiser states and the noise stream as `dir/{prefix}*.bpk|json`.
+    pub fn save(&self, dir: &Path, prefix: &str) -> Result<(), LearnError> {
+        let path = |name: &str| dir.join(format!("{prefix}{name}"));
+        let p = path("actor.bpk");
+        self.actor
+            .clone()
+            .save_file(&p)
+            .map_err(|e| save_error(&p, e))?;
+        let p = path("critic.bpk");
+        self.critic
+            .clone()
+            .save_file(&p)
+            .map_err(|e| save_error(&p, e))?;
+        let p = path("critic_target.bpk");
+        self.target
+            .clone()
+            .save_file(&p)
+            .map_err(|e| save_error(&p, e))?;
+        let p = path("temperature.bpk");
+        self.temperature
+            .clone()
+            .save_file(&p)
+            .map_err(|e| save_error(&p, e))?;
+        for (name, opt) in [
+            ("actor_adam.bpk", &self.actor_opt),
+            ("critic_adam.bpk", &self.critic_opt),
+            ("temperature_adam.bpk", &self.temperature_opt),
+        ] {
+            let p = path(name);
+            opt.save(&p).map_err(|e| save_error(&p, e))?;
+        }
+        let p = path("noise.json");
+        let noise = serde_json::to_vec(&self.noise).map_err(|e| save_error(&p, e))?;
+        std::fs::write(&p, noise).map_err(|e| save_error(&p, e))
+    }
+
+    /// Restores what [`SacLearner::save`] wrote with the same `prefix`.
+    pub fn load(&mut self, dir: &Path, prefix: &str) -> Result<(), LearnError> {
+        let path = |name: &str| dir.join(format!("{prefix}{name}"));
+        let p = path("actor.bpk");
+        self.actor = self
+            .actor
+            .clone()
+            .try_load_file(&p)
+            .map_err(|e| load_error(&p, e))?;
+        let p = path("critic.bpk");
+        self.critic = self
+            .critic
+            .clone()
+            .try_load_file(&p)
+            .map_err(|e| load_error(&p, e))?;
+        let p = path("critic_target.bpk");
+        self.target = self
+            .target
+            .clone()
+            .try_load_file(&p)
+            .map_err(|e| load_error(&p, e))?
+            .valid();
+        let p = path("temperature.bpk");
+        self.temperature = self
+            .temperature
+            .clone()
+            .try_load_file(&p)
+            .map_err(|e| load_error(&p, e))?;
+        for (name, opt) in [
+            ("actor_adam.bpk", &mut self.actor_opt),
+            ("critic_adam.bpk", &mut self.critic_opt),
+            ("temperature_adam.bpk", &mut self.temperature_opt),
+        ] {
+            let p = path(name);
+            *opt = opt.clone().load(&p).map_err(|e| load_error(&p, e))?;
+        }
+        let p = path("noise.json");
+        let bytes = std::fs::read(&p).map_err(|e| load_error(&p, e))?;
+        self.noise = serde_json::from_slice(&bytes).map_err(|e| load_error(&p, e))?;
+        Ok(())
+    }
+}
+
+/// Which part of a transition the SAC baselines condition on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputView {
+    /// The true state `s_t` (delay-free SAC; with Δ = 0, `x_t = s_t`).
+    TrueState,
+    /// The last received observation `s_{t-Δ}`: the first `obs_dim` entries of `x_t`.
+    LastObservation,
+    /// The whole augmented state `x_t`.
+    Augmented,
+}
+
+impl InputView {
+    fn width(self, spec: &AgentSpec) -> usize {
+        match self {
+            InputView::TrueState | InputView::LastObservation => spec.obs_dim,
+            InputView::Augmented => spec.augmented_dim(),
+        }
+    }
+
+    /// The view's rows out of `rows` augmented states.
+    fn from_augmented(self, augmented: &[f32], rows: usize, spec: &AgentSpec) -> Vec<f32> {
+        let (aug, width) = (spec.augmented_dim(), self.width(spec));
+        if width == aug {
+            return augmented[..rows * aug].to_vec();
+        }
+        augmented
+            .chunks(aug)
+            .take(rows)
+            .flat_map(|x| &x[..width])
+            .copied()
+            .collect()
+    }
+
+    /// `(input, next input)` of a batch of transitions.
+    fn of_batch(self, batch: &Transitions, spec: &AgentSpec) -> (Vec<f32>, Vec<f32>) {
+        let rows = batch.len();
+        match self {
+            InputView::TrueState => (batch.state.clone(), batch.next_state.clone()),
+            InputView::LastObservation | InputView::Augmented => (
+                self.from_augmented(&batch.augmented, rows, spec),
+                self.from_augmented(&batch.next_augmented, rows, spec),
+            ),
+        }
+    }
+}
+
+/// A SAC baseline: [`SacLearner`] on one [`InputView`].
+pub struct SacAgent {
+    view: InputView,
+    spec: AgentSpec,
+    learner: SacLearner,
+}
+
+impl SacAgent {
+    pub fn new(
+        view: InputView,
+        spec: &AgentSpec,
+        hyper: &Hyper,
+        devices: &Devices,
+        seed: u64,
+    ) -> SacAgent {
+        SacAgent {
+            view,
+            spec: spec.clone(),
+            learner: SacLearner::new(view.width(spec), spec, hyper, devices, seed),
+        }
+    }
+}
+
+/// Delay-free SAC on the true state: the upper reference, run with Δ = 0.
+pub fn delay_free_sac(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u64) -> SacAgent {
+    SacAgent::new(InputView::TrueState, spec, hyper, devices, seed)
+}
+
+impl Agent for SacAgent {
+    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+        let view = match self.view {
+            // At Δ = 0 the first obs_dim entries of x_t are s_t.
+            InputView::TrueState => InputView::LastObservation,
+            view => view,
+        };
+        let width = view.width(&self.spec);
+        let input = matrix(
+            view.from_augmented(augmented, rows, &self.spec),
+            rows,
+            width,
+            &self.learner.devices.plain,
+        );
+        to_vec(match mode {
+            ActMode::Explore => self.learner.explore(input),
+            ActMode::Deterministic => self.learner.exploit(input),
+        })
+    }
+
+    fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {
+        let (rows, width, act) = (batch.len(), self.view.width(&self.spec), self.spec.act_dim);
+        let plain = self.learner.devices.plain.clone();
+        let (input, next_input) = self.view.of_batch(batch, &self.spec);
+        let done = batch.terminated.iter().map(|&d| d as f32).collect();
+        let stats = self.learner.update(
+            matrix(input, rows, width, &plain),
+            matrix(batch.action.clone(), rows, act, &plain),
+            column(batch.reward.clone(), &plain),
+            matrix(next_input, rows, width, &plain),
+            column(done, &plain),
+        );
+        vec![
+            ("critic_loss", stats.critic_loss),
+            ("actor_loss", stats.actor_loss),
+            ("alpha", stats.alpha),
+            ("alpha_loss", stats.alpha_loss),
+        ]
+    }
+
+    fn save(&self, dir: &Path) -> Result<(), LearnError> {
+        self.learner.save(dir, "")
+    }
+
+    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
+        self.learner.load(dir, "")
+    }
+}

@@ -1,0 +1,96 @@
+//! The SAC losses as the papers write them, each a small function of tensors. Equation
+//! numbers refer to Haarnoja et al., "Soft Actor-Critic Algorithms and Applications" (2018).
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
+use burn::prelude::*;
+use burn::tensor::activation::softplus;
+
+/// `ln √(2π)`.
+const HALF_LN_TWO_PI: f64 = 0.918_938_533_204_672_7;
+
+/// Log-density of `a = scale·tanh(u)`, `u = μ + σ·ε ~ N(μ, σ²)` (Eq. 26 of Haarnoja et al.):
+/// `Σ_j [log N(u_j; μ_j, σ_j) − log(1 − tanh²(u_j))] − Σ_j ln scale_j`, with the stable form
+/// `log(1 − tanh² u) = 2(ln 2 − u − softplus(−2u))`. `[B, A]` inputs, `[B, 1]` result.
+pub fn squashed_gaussian_log_prob(
+    u: Tensor<2>,
+    eps: Tensor<2>,
+    log_std: Tensor<2>,
+    log_scale_sum: f64,
+) -> Tensor<2> {
+    let gaussian = eps.square().mul_scalar(-0.5) - log_std - HALF_LN_TWO_PI;
+    let log_det_tanh = (u.clone().neg() - softplus(u.mul_scalar(-2.0), 1.0))
+        .add_scalar(std::f64::consts::LN_2)
+        .mul_scalar(2.0);
+    (gaussian - log_det_tanh)
+        .sum_dim(1)
+        .sub_scalar(log_scale_sum)
+}
+
+/// The soft Bellman target (Eq. 3, with the twin-critic minimum):
+/// `y = r + γ·(1 − done)·(min_j Q̄_j(s', a') − α·log π(a'|s'))`, `[B, 1]`.
+pub fn critic_target(
+    reward: Tensor<2>,
+    done: Tensor<2>,
+    next_q_min: Tensor<2>,
+    next_log_prob: Tensor<2>,
+    alpha: f64,
+    gamma: f64,
+) -> Tensor<2> {
+    let soft_value = next_q_min - next_log_prob.mul_scalar(alpha);
+    reward + done.neg().add_scalar(1.0) * soft_value.mul_scalar(gamma)
+}
+
+/// `J_Q = E[(Q_1(s, a) − y)²] + E[(Q_2(s, a) − y)²]` (Eq. 5, both critics).
+pub fn critic_loss(q1: Tensor<2>, q2: Tensor<2>, target: Tensor<2>) -> Tensor<1> {
+    (q1 - target.clone()).square().mean() + (q2 - target).square().mean()
+}
+
+/// `J_π = E[α·log π(a|s) − min_j Q_j(s, a)]`, `a ~ π(·|s)` (Eq. 7).
+pub fn actor_loss(log_prob: Tensor<2>, q_min: Tensor<2>, alpha: f64) -> Tensor<1> {
+    (log_prob.mul_scalar(alpha) - q_min).mean()
+}
+
+/// `J(α) = E[−α·(log π(a|s) + H̄)]` with `α = exp(log α)` and the log-probabilities held
+/// fixed (Eq. 18); `mean_log_prob` is their batch mean.
+pub fn temperature_loss(
+    log_alpha: Tensor<1>,
+    mean_log_prob: f64,
+    target_entropy: f64,
+) -> Tensor<1> {
+    log_alpha
+        .exp()
+        .mul_scalar(-(mean_log_prob + target_entropy))
+}
+
+/// Polyak averaging `θ̄ ← τ·θ + (1 − τ)·θ̄` of every parameter of `target` toward `online`.
+/// `target` lives on the plain device, so the result never enters an autodiff graph.
+pub fn polyak<M: Module>(target: M, online: &M, tau: f64) -> M {
+    struct Collect(Vec<Tensor<1>>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.0.push(param.val().inner().reshape([-1]));
+        }
+    }
+    struct Blend {
+        online: std::vec::IntoIter<Tensor<1>>,
+        tau: f64,
+    }
+    impl ModuleMapper for Blend {
+        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+            let online = self
+                .online
+                .next()
+                .expect("target and online networks have the same parameters");
+            let tau = self.tau;
+            param.map(|theta_bar| {
+                let theta: Tensor<D> = online.reshape(theta_bar.shape());
+                theta_bar.mul_scalar(1.0 - tau) + theta.mul_scalar(tau)
+            })
+        }
+    }
+    let mut online_params = Collect(Vec::new());
+    online.visit(&mut online_params);
+    target.map(&mut Blend {
+        online: online_params.0.into_iter(),
+        tau,
+    })
+}

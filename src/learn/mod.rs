@@ -1,0 +1,33 @@
+//! The pieces every learner is built from, in burn 0.22: devices, networks, the SAC losses
+//! (each a small function tested against hand-computed values), Polyak averaging and
+//! host-side noise so that runs are reproducible and resumable.
+
+mod device;
+mod losses;
+mod nets;
+mod noise;
+mod tensors;
+
+pub use device::{Devices, LearnDevice};
+pub use losses::{
+    actor_loss, critic_loss, critic_target, polyak, squashed_gaussian_log_prob, temperature_loss,
+};
+pub use nets::{
+    ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, PolicySample, QNetwork,
+    Temperature, TwinQ,
+};
+pub use noise::Noise;
+pub use tensors::{column, matrix, to_vec};
+
+/// What can go wrong while learning, saving or loading.
+#[derive(Debug, thiserror::Error)]
+pub enum LearnError {
+    #[error(
+        "--device wgpu needs the `wgpu-learner` cargo feature: build with `cargo build --release --features wgpu-learner`"
+    )]
+    WgpuNotBuilt,
+    #[error("cannot save {what}: {message}")]
+    Save { what: String, message: String },
+    #[error("cannot load {what}: {message}")]
+    Load { what: String, message: String },
+}

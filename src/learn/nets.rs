@@ -1,0 +1,185 @@
+//! Networks: 256-256 ReLU MLPs, a tanh-squashed Gaussian policy, twin Q-networks and the
+//! learned temperature.
+use burn::module::Param;
+use burn::nn::{Linear, LinearConfig};
+use burn::prelude::*;
+use burn::tensor::activation::relu;
+
+use super::losses::squashed_gaussian_log_prob;
+use super::tensors::matrix;
+
+/// Hidden width of every network (SPEC §3).
+pub const HIDDEN: usize = 256;
+/// Bounds of the policy's log standard deviation.
+pub const LOG_STD_MIN: f64 = -20.0;
+pub const LOG_STD_MAX: f64 = 2.0;
+
+/// Two hidden ReLU layers.
+#[derive(Module, Debug)]
+struct Trunk {
+    l1: Linear,
+    l2: Linear,
+}
+
+impl Trunk {
+    fn new(input: usize, device: &Device) -> Trunk {
+        Trunk {
+            l1: LinearConfig::new(input, HIDDEN).init(device),
+            l2: LinearConfig::new(HIDDEN, HIDDEN).init(device),
+        }
+    }
+
+    fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        relu(self.l2.forward(relu(self.l1.forward(x))))
+    }
+}
+
+/// `Q(input, a)`.
+#[derive(Module, Debug)]
+pub struct QNetwork {
+    trunk: Trunk,
+    out: Linear,
+}
+
+impl QNetwork {
+    pub fn new(input: usize, act_dim: usize, device: &Device) -> QNetwork {
+        QNetwork {
+            trunk: Trunk::new(input + act_dim, device),
+            out: LinearConfig::new(HIDDEN, 1).init(device),
+        }
+    }
+
+    /// `[B, 1]`
+    pub fn forward(&self, input: Tensor<2>, action: Tensor<2>) -> Tensor<2> {
+        self.out
+            .forward(self.trunk.forward(Tensor::cat(vec![input, action], 1)))
+    }
+}
+
+/// Twin critics; the learners use the minimum of the two.
+#[derive(Module, Debug)]
+pub struct TwinQ {
+    pub q1: QNetwork,
+    pub q2: QNetwork,
+}
+
+impl TwinQ {
+    /// Two independently initialised critics.
+    pub fn new(input: usize, act_dim: usize, device: &Device) -> TwinQ {
+        TwinQ {
+            q1: QNetwork::new(input, act_dim, device),
+            q2: QNetwork::new(input, act_dim, device),
+        }
+    }
+
+    /// `min(Q1, Q2)`, `[B, 1]`.
+    pub fn min(&self, input: Tensor<2>, action: Tensor<2>) -> Tensor<2> {
+        self.q1
+            .forward(input.clone(), action.clone())
+            .min_pair(self.q2.forward(input, action))
+    }
+}
+
+/// The affine map from `tanh(u) ∈ (-1, 1)` to the action bounds.
+#[derive(Debug, Clone)]
+pub struct ActionScale {
+    /// `(high − low) / 2`, `[1, A]` on the plain device.
+    pub scale: Tensor<2>,
+    /// `(high + low) / 2`, `[1, A]`.
+    pub bias: Tensor<2>,
+    /// `Σ_j ln scale_j`: the log-determinant of the affine map.
+    pub log_scale_sum: f64,
+}
+
+impl ActionScale {
+    pub fn new(low: &[f64], high: &[f64], device: &Device) -> ActionScale {
+        let scale: Vec<f32> = low
+            .iter()
+            .zip(high)
+            .map(|(l, h)| ((h - l) / 2.0) as f32)
+            .collect();
+        let bias: Vec<f32> = low
+            .iter()
+            .zip(high)
+            .map(|(l, h)| ((h + l) / 2.0) as f32)
+            .collect();
+        let log_scale_sum = scale.iter().map(|s| f64::from(*s).ln()).sum();
+        let a = scale.len();
+        ActionScale {
+            scale: matrix(scale, 1, a, device),
+            bias: matrix(bias, 1, a, device),
+            log_scale_sum,
+        }
+    }
+}
+
+/// An action drawn from the policy with its log-density.
+pub struct PolicySample {
+    /// `[B, A]`, within the action bounds.
+    pub action: Tensor<2>,
+    /// `[B, 1]`
+    pub log_prob: Tensor<2>,
+}
+
+/// The tanh-squashed Gaussian policy `π(a|input)`.
+#[derive(Module, Debug)]
+pub struct GaussianPolicy {
+    trunk: Trunk,
+    mean: Linear,
+    log_std: Linear,
+}
+
+impl GaussianPolicy {
+    pub fn new(input: usize, act_dim: usize, device: &Device) -> GaussianPolicy {
+        GaussianPolicy {
+            trunk: Trunk::new(input, device),
+            mean: LinearConfig::new(HIDDEN, act_dim).init(device),
+            log_std: LinearConfig::new(HIDDEN, act_dim).init(device),
+        }
+    }
+
+    /// Mean and clamped log standard deviation of the Gaussian before squashing.
+    pub fn distribution(&self, input: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+        let h = self.trunk.forward(input);
+        (
+            self.mean.forward(h.clone()),
+            self.log_std.forward(h).clamp(LOG_STD_MIN, LOG_STD_MAX),
+        )
+    }
+
+    /// `a = scale·tanh(μ + σ·ε) + bias` with its log-density, reparameterised through `ε`.
+    pub fn sample(&self, input: Tensor<2>, eps: Tensor<2>, scale: &ActionScale) -> PolicySample {
+        let (mean, log_std) = self.distribution(input);
+        let u = mean + log_std.clone().exp() * eps.clone();
+        let log_prob = squashed_gaussian_log_prob(u.clone(), eps, log_std, scale.log_scale_sum);
+        PolicySample {
+            action: u.tanh() * scale.scale.clone() + scale.bias.clone(),
+            log_prob,
+        }
+    }
+
+    /// The deterministic action `scale·tanh(μ) + bias` (evaluation).
+    pub fn mode(&self, input: Tensor<2>, scale: &ActionScale) -> Tensor<2> {
+        let (mean, _) = self.distribution(input);
+        mean.tanh() * scale.scale.clone() + scale.bias.clone()
+    }
+}
+
+/// The entropy temperature `α = exp(log α)`.
+#[derive(Module, Debug)]
+pub struct Temperature {
+    pub log_alpha: Param<Tensor<1>>,
+}
+
+impl Temperature {
+    pub fn new(initial_alpha: f64, device: &Device) -> Temperature {
+        Temperature {
+            log_alpha: Param::from_data([initial_alpha.ln() as f32], device),
+        }
+    }
+
+    /// The current α as a number.
+    pub fn alpha(&self) -> f64 {
+        f64::from(self.log_alpha.val().inner().exp().into_scalar::<f32>())
+    }
+}

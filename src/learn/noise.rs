@@ -1,0 +1,30 @@
+//! Standard normal noise drawn on the host from a seeded stream, so that a run's randomness
+//! is reproducible, independent of the backend, and saved in checkpoints.
+use burn::prelude::{Device, Tensor};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use super::tensors::matrix;
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Noise {
+    rng: ChaCha8Rng,
+}
+
+impl Noise {
+    pub fn new(seed: u64) -> Noise {
+        Noise {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+        }
+    }
+
+    /// A `[rows, cols]` tensor of independent N(0, 1) draws.
+    pub fn normal(&mut self, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
+        let values = (0..rows * cols)
+            .map(|_| StandardNormal.sample(&mut self.rng))
+            .collect();
+        matrix(values, rows, cols, device)
+    }
+}

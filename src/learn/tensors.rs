@@ -1,0 +1,22 @@
+//! Host arrays in and out of tensors.
+use burn::prelude::{Device, Tensor, TensorData};
+
+/// A `[rows, cols]` tensor from row-major values.
+pub fn matrix(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(values, [rows, cols]), device)
+}
+
+/// A `[rows, 1]` tensor.
+pub fn column(values: Vec<f32>, device: &Device) -> Tensor<2> {
+    let rows = values.len();
+    matrix(values, rows, 1, device)
+}
+
+/// The values of a tensor, row-major.
+pub fn to_vec<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
+    tensor
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .expect("a float tensor converts to f32")
+}

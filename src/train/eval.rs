@@ -1,0 +1,91 @@
+//! Evaluation on separate delayed copies with deterministic actions (SPEC §3): an episode's
+//! return is the sum of the true rewards of all its steps, the warm-up steps before the first
+//! observation arrives included, up to termination or the time limit.
+use crate::algos::{ActMode, Agent};
+use crate::delay::{CpuDelayLayer, DelayConfig, StepInput};
+use crate::sim::{BatchConfig, BatchedEnv};
+use crate::tasks::TaskName;
+
+use super::TrainError;
+
+/// Mean and spread of evaluation episodes.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EvalResult {
+    pub return_mean: f64,
+    /// Population standard deviation over the episodes.
+    pub return_std: f64,
+    pub length_mean: f64,
+    pub episodes: usize,
+}
+
+/// Plays one episode on each of `episodes` fresh copies (seeded by `seed`) under `delay`.
+pub fn evaluate(
+    agent: &mut dyn Agent,
+    task: TaskName,
+    delay: &DelayConfig,
+    episodes: usize,
+    threads: usize,
+    seed: u64,
+) -> Result<EvalResult, TrainError> {
+    let mut env = BatchedEnv::new(&BatchConfig {
+        task,
+        envs: episodes,
+        threads,
+        seed,
+        actuator_noise: delay.actuator_noise,
+    })?;
+    let (low, high) = (
+        env.action_bounds().0.to_vec(),
+        env.action_bounds().1.to_vec(),
+    );
+    let (obs_dim, act_dim) = (env.obs_dim(), env.act_dim());
+    let mut layer = CpuDelayLayer::new(delay, episodes, obs_dim, &low, &high, seed)?;
+    layer.reset(env.observations())?;
+    let aug = layer.layout().augmented_dim();
+    let mut finished = vec![false; episodes];
+    let mut returns = vec![0.0f64; episodes];
+    let mut lengths = vec![0u32; episodes];
+    while finished.iter().any(|f| !f) {
+        let acting: Vec<usize> = (0..episodes)
+            .filter(|&i| !finished[i] && layer.ready()[i] == 1)
+            .collect();
+        let mut actions = vec![0.0f32; episodes * act_dim];
+        if !acting.is_empty() {
+            let inputs: Vec<f32> = acting
+                .iter()
+                .flat_map(|&i| &layer.augmented()[i * aug..(i + 1) * aug])
+                .copied()
+                .collect();
+            let chosen = agent.act(&inputs, acting.len(), ActMode::Deterministic);
+            for (k, &i) in acting.iter().enumerate() {
+                actions[i * act_dim..(i + 1) * act_dim]
+                    .copy_from_slice(&chosen[k * act_dim..(k + 1) * act_dim]);
+            }
+        }
+        layer.fill_warmup(&mut actions)?;
+        env.step(&actions)?;
+        layer.step(&StepInput::from_env(&env, &actions))?;
+        for i in 0..episodes {
+            if !finished[i] {
+                returns[i] += f64::from(env.rewards()[i]);
+                lengths[i] += 1;
+                finished[i] = env.terminated()[i] == 1 || env.truncated()[i] == 1;
+            }
+        }
+    }
+    let n = episodes as f64;
+    let return_mean = returns.iter().sum::<f64>() / n;
+    let return_std = (returns
+        .iter()
+        .map(|r| (r - return_mean).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let length_mean = lengths.iter().map(|&l| f64::from(l)).sum::<f64>() / n;
+    Ok(EvalResult {
+        return_mean,
+        return_std,
+        length_mean,
+        episodes,
+    })
+}

@@ -1,0 +1,57 @@
+//! `evals.csv` and `train.csv`: appended a line at a time (flushed), and cut back to the
+//! checkpoint's step, atomically, when a run resumes.
+use std::fs::{File, OpenOptions};
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+
+use super::{TrainError, io_error};
+
+pub struct CsvLog {
+    path: PathBuf,
+    file: File,
+}
+
+impl CsvLog {
+    /// Opens `path` for appending, writing `header` if the file is new.
+    pub fn open(path: PathBuf, header: &[&str]) -> Result<CsvLog, TrainError> {
+        let fresh = !path.exists();
+        let mut file = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .map_err(io_error(&path))?;
+        if fresh {
+            writeln!(file, "{}", header.join(",")).map_err(io_error(&path))?;
+        }
+        Ok(CsvLog { path, file })
+    }
+
+    pub fn append(&mut self, values: &[String]) -> Result<(), TrainError> {
+        writeln!(self.file, "{}", values.join(",")).map_err(io_error(&self.path))?;
+        self.file.flush().map_err(io_error(&self.path))
+    }
+}
+
+/// Keeps the header and the rows whose first column (the step) is at most `step`, replacing
+/// the file atomically.
+pub fn truncate_after(path: &Path, step: u64) -> Result<(), TrainError> {
+    if !path.exists() {
+        return Ok(());
+    }
+    let reader = BufReader::new(File::open(path).map_err(io_error(path))?);
+    let mut kept = Vec::new();
+    for (i, line) in reader.lines().enumerate() {
+        let line = line.map_err(io_error(path))?;
+        let row_step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
+        if i == 0 || row_step.is_some_and(|s| s <= step) {
+            kept.push(line);
+        }
+    }
+    let tmp = path.with_extension("csv.tmp");
+    let mut out = File::create(&tmp).map_err(io_error(&tmp))?;
+    for line in kept {
+        writeln!(out, "{line}").map_err(io_error(&tmp))?;
+    }
+    out.sync_all().map_err(io_error(&tmp))?;
+    std::fs::rename(&tmp, path).map_err(io_error(path))
+}

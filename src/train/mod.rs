@@ -1,0 +1,48 @@
+//! `dhrl train` and `dhrl eval`: the loop every algorithm runs in — random warm-up, then one
+//! gradient update per environment step, periodic evaluation on separate delayed copies,
+//! CSV logs, and atomic checkpoints that a killed run resumes from.
+
+mod checkpoint;
+mod config;
+mod eval;
+mod logs;
+mod run;
+
+pub use config::{ConfigError, TrainConfig};
+pub use eval::{EvalResult, evaluate};
+pub use run::{Start, TrainSummary, evaluate_saved, train};
+
+use crate::delay::{DelayError, ReplayError};
+use crate::learn::LearnError;
+use crate::sim::SimError;
+use crate::snapshot::SnapshotError;
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error(transparent)]
+    Delay(#[from] DelayError),
+    #[error(transparent)]
+    Replay(#[from] ReplayError),
+    #[error(transparent)]
+    Learn(#[from] LearnError),
+    #[error("checkpoint: {0}")]
+    Snapshot(#[from] SnapshotError),
+    #[error("{path}: {message}")]
+    Io { path: String, message: String },
+    #[error("{0} already exists; pick another --out, or continue it with --resume {0}")]
+    OutputExists(String),
+    #[error("{0} holds no checkpoint to resume from (nothing was saved before the run stopped)")]
+    NoCheckpoint(String),
+}
+
+/// Wraps an I/O error with the path it concerns.
+pub(crate) fn io_error(path: &std::path::Path) -> impl Fn(std::io::Error) -> TrainError + '_ {
+    move |e| TrainError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
+}

@@ -1,0 +1,187 @@
+//! The SAC pieces against values computed by hand on tiny inputs.
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::optim::GradientsParams;
+use burn::prelude::*;
+use dhrl::learn::{
+    Devices, LearnDevice, QNetwork, Temperature, TwinQ, actor_loss, column, critic_loss,
+    critic_target, matrix, polyak, squashed_gaussian_log_prob, temperature_loss, to_vec,
+};
+
+fn devices() -> Devices {
+    Devices::new(LearnDevice::Cpu).unwrap()
+}
+
+fn close(a: f32, b: f64, tol: f64) {
+    assert!(
+        (f64::from(a) - b).abs() <= tol * b.abs().max(1.0),
+        "{a} vs {b}"
+    );
+}
+
+/// log N(u; μ, σ) − log(1 − tanh²u) − ln scale, written the naive way.
+fn naive_log_prob(eps: f64, log_std: f64, u: f64, scale: f64) -> f64 {
+    let gaussian = -0.5 * eps * eps - log_std - 0.5 * (2.0 * std::f64::consts::PI).ln();
+    gaussian - (1.0 - u.tanh().powi(2)).ln() - scale.ln()
+}
+
+#[test]
+fn squashed_gaussian_log_prob_matches_the_formula() {
+    let d = devices();
+    // Two rows, two action dimensions; action scale 3 on both (InvertedPendulum-like bounds).
+    let (eps, log_std, mean) = (
+        [0.5, -1.2, 0.0, 2.0],
+        [0.0, -0.5, 0.3, -1.0],
+        [0.1, 0.4, -0.7, 0.0],
+    );
+    let u: Vec<f32> = (0..4)
+        .map(|i| (mean[i] + (log_std[i] as f64).exp() * eps[i]) as f32)
+        .collect();
+    let log_prob = squashed_gaussian_log_prob(
+        matrix(u.clone(), 2, 2, &d.plain),
+        matrix(eps.map(|v| v as f32).to_vec(), 2, 2, &d.plain),
+        matrix(log_std.map(|v| v as f32).to_vec(), 2, 2, &d.plain),
+        2.0 * 3.0f64.ln(),
+    );
+    let got = to_vec(log_prob);
+    for row in 0..2 {
+        let want: f64 = (0..2)
+            .map(|j| {
+                naive_log_prob(
+                    eps[2 * row + j],
+                    log_std[2 * row + j],
+                    f64::from(u[2 * row + j]),
+                    3.0,
+                )
+            })
+            .sum();
+        close(got[row], want, 1e-5);
+    }
+}
+
+#[test]
+fn squashed_gaussian_log_prob_is_stable_where_tanh_saturates() {
+    let d = devices();
+    // u = 20: 1 − tanh²u underflows in f32, the stable form gives 2(ln 2 − 20 − softplus(−40)).
+    let got = to_vec(squashed_gaussian_log_prob(
+        matrix(vec![20.0], 1, 1, &d.plain),
+        matrix(vec![0.0], 1, 1, &d.plain),
+        matrix(vec![0.0], 1, 1, &d.plain),
+        0.0,
+    ));
+    let want = -0.5 * (2.0 * std::f64::consts::PI).ln() - 2.0 * (std::f64::consts::LN_2 - 20.0);
+    assert!(got[0].is_finite());
+    close(got[0], want, 1e-5);
+}
+
+#[test]
+fn critic_target_bootstraps_unless_terminated() {
+    let d = devices();
+    let y = critic_target(
+        column(vec![1.0, 2.0], &d.plain),
+        column(vec![0.0, 1.0], &d.plain),
+        column(vec![10.0, 10.0], &d.plain),
+        column(vec![-1.0, -1.0], &d.plain),
+        0.2,
+        0.99,
+    );
+    let y = to_vec(y);
+    close(y[0], 1.0 + 0.99 * (10.0 + 0.2), 1e-6); // 11.098
+    close(y[1], 2.0, 1e-6); // terminal: reward only
+}
+
+#[test]
+fn critic_and_actor_losses_match_hand_values() {
+    let d = devices();
+    let q1 = column(vec![1.0, 2.0], &d.plain);
+    let q2 = column(vec![0.0, 0.0], &d.plain);
+    let y = column(vec![1.0, 1.0], &d.plain);
+    // mean((0, 1)²) + mean((−1, −1)²) = 0.5 + 1
+    close(to_vec(critic_loss(q1, q2, y))[0], 1.5, 1e-6);
+    // mean(0.5·(−1) − 2, 0.5·1 − 4) = mean(−2.5, −3.5)
+    let loss = actor_loss(
+        column(vec![-1.0, 1.0], &d.plain),
+        column(vec![2.0, 4.0], &d.plain),
+        0.5,
+    );
+    close(to_vec(loss)[0], -3.0, 1e-6);
+}
+
+#[test]
+fn temperature_loss_and_its_gradient_match_hand_values() {
+    let d = devices();
+    let temperature = Temperature::new(0.2, &d.train);
+    // J(α) = −α(mean log π + H̄) = −0.2·(−2 − 1) = 0.6; dJ/d log α = −α(mean log π + H̄) = 0.6.
+    let loss = temperature_loss(temperature.log_alpha.val(), -2.0, -1.0);
+    close(to_vec(loss.clone().inner())[0], 0.6, 1e-6);
+    let mut grads = loss.backward();
+    let grads = GradientsParams::from_module(&mut grads, &temperature);
+    let grad: Tensor<1> = grads
+        .get(temperature.log_alpha.id)
+        .expect("log α has a gradient");
+    close(to_vec(grad)[0], 0.6, 1e-5);
+}
+
+/// Every parameter of a module, flattened, in declaration order.
+fn parameters<M: Module>(module: &M) -> Vec<f32> {
+    struct Collect(Vec<f32>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.0.extend(to_vec(param.val().inner()));
+        }
+    }
+    let mut all = Collect(Vec::new());
+    module.visit(&mut all);
+    all.0
+}
+
+#[test]
+fn polyak_moves_the_target_by_tau() {
+    let d = devices();
+    let online = QNetwork::new(3, 2, &d.train);
+    let target = QNetwork::new(3, 2, &d.train).valid();
+    let (before, theta) = (parameters(&target), parameters(&online));
+    let after = parameters(&polyak(target, &online, 0.005));
+    assert_eq!(after.len(), theta.len());
+    for ((a, b), t) in after.iter().zip(&before).zip(&theta) {
+        close(*a, 0.995 * f64::from(*b) + 0.005 * f64::from(*t), 1e-6);
+    }
+}
+
+#[test]
+fn target_networks_receive_no_gradient() {
+    let d = devices();
+    let critic = TwinQ::new(3, 1, &d.train);
+    let target = critic.valid();
+    let input = matrix(vec![0.1, 0.2, 0.3, -0.1, 0.0, 0.5], 2, 3, &d.plain);
+    let action = matrix(vec![0.3, -0.3], 2, 1, &d.plain);
+    let y = target.min(input.clone(), action.clone());
+    assert!(!y.is_tracked(), "the target's output is a constant");
+    let loss = critic_loss(
+        critic.q1.forward(input.clone(), action.clone()),
+        critic.q2.forward(input, action),
+        y,
+    );
+    let mut grads = loss.backward();
+    assert!(
+        GradientsParams::from_module(&mut grads, &target).is_empty(),
+        "no gradient reaches the target critics"
+    );
+    assert!(
+        !GradientsParams::from_module(&mut grads, &critic).is_empty(),
+        "the online critics do get gradients"
+    );
+    let moved = polyak(target, &critic, 0.5);
+    assert!(parameters(&moved).iter().all(|v| v.is_finite()));
+    let mut untracked = true;
+    struct Check<'a>(&'a mut bool);
+    impl ModuleVisitor for Check<'_> {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            *self.0 &= !param.val().is_autodiff();
+        }
+    }
+    moved.visit(&mut Check(&mut untracked));
+    assert!(
+        untracked,
+        "Polyak averaging keeps the targets off the autodiff graph"
+    );
+}

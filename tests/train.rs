@@ -1,0 +1,234 @@
+//! `dhrl train` end to end: it learns, it refuses to overwrite, and a killed run resumes to
+//! exactly the run that was never interrupted.
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn dhrl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(out: Output) -> String {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Column `name` of a CSV file.
+fn column(path: &Path, name: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let k = header
+        .iter()
+        .position(|h| *h == name)
+        .unwrap_or_else(|| panic!("no column {name} in {header:?}"));
+    lines
+        .map(|l| l.split(',').nth(k).unwrap().to_string())
+        .collect()
+}
+
+const SMALL: [&str; 14] = [
+    "--task",
+    "inverted-pendulum",
+    "--warmup-steps",
+    "300",
+    "--eval-every",
+    "500",
+    "--eval-episodes",
+    "3",
+    "--checkpoint-every",
+    "500",
+    "--batch-size",
+    "64",
+    "--seed",
+    "4",
+];
+
+/// Random actions keep the pole up for a few steps; SAC keeps it up far longer after a few
+/// thousand steps.
+#[test]
+fn sac_clearly_beats_a_random_policy_on_inverted_pendulum() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    ok(dhrl(&[
+        "train",
+        "--task",
+        "inverted-pendulum",
+        "--steps",
+        "3000",
+        "--warmup-steps",
+        "500",
+        "--eval-every",
+        "1000",
+        "--eval-episodes",
+        "5",
+        "--seed",
+        "1",
+        "--out",
+        run.to_str().unwrap(),
+    ]));
+    let returns: Vec<f64> = column(&run.join("evals.csv"), "return_mean")
+        .iter()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    // What the warm-up's random actions achieve: an episode of a uniform random policy.
+    let random = 10.0;
+    let best = returns.iter().cloned().fold(f64::MIN, f64::max);
+    assert!(
+        best > 5.0 * random,
+        "SAC's evaluation returns {returns:?} are not clearly above a random policy's ~{random}"
+    );
+    let eval = ok(dhrl(&["eval", run.to_str().unwrap(), "--episodes", "3"]));
+    assert!(eval.starts_with("return "), "{eval}");
+    assert!(
+        std::fs::read_to_string(run.join("config.toml"))
+            .unwrap()
+            .contains("algo = \"sac\"")
+    );
+}
+
+#[test]
+fn killed_run_resumes_to_the_uninterrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let (whole, killed) = (dir.path().join("whole"), dir.path().join("killed"));
+    let with_out = |out: &Path| {
+        let mut args = vec![
+            "train",
+            "--steps",
+            "2000",
+            "--algo",
+            "augmented-sac",
+            "--delay",
+            "2",
+        ];
+        args.extend_from_slice(&SMALL);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        args.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    ok(Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(with_out(&whole))
+        .output()
+        .unwrap());
+
+    // Start the same run, kill it once its first checkpoint is on disk, resume it.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(with_out(&killed))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !killed.join("checkpoint/state.json").exists() {
+        assert!(
+            start.elapsed() < Duration::from_secs(300),
+            "no checkpoint appeared"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(700));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let resumed = dhrl(&["train", "--resume", killed.to_str().unwrap()]);
+    ok(resumed);
+
+    for (file, columns) in [
+        (
+            "evals.csv",
+            &["step", "return_mean", "return_std", "length_mean"][..],
+        ),
+        (
+            "train.csv",
+            &[
+                "step",
+                "updates",
+                "critic_loss",
+                "actor_loss",
+                "alpha",
+                "alpha_loss",
+            ][..],
+        ),
+    ] {
+        for name in columns {
+            assert_eq!(
+                column(&killed.join(file), name),
+                column(&whole.join(file), name),
+                "{file} column {name}"
+            );
+        }
+    }
+    assert!(column(&whole.join("evals.csv"), "step").len() >= 4);
+}
+
+#[test]
+fn existing_run_folders_are_never_overwritten() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dhrl(&[
+        "train",
+        "--steps",
+        "10",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let msg = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        msg.contains("already exists") && msg.contains("--resume"),
+        "{msg}"
+    );
+    let out = dhrl(&["train", "--resume", dir.path().to_str().unwrap()]);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("config.toml"),
+        "resume needs a run folder"
+    );
+}
+
+#[test]
+fn bad_training_options_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("r");
+    let out = dhrl(&[
+        "train",
+        "--algo",
+        "sac",
+        "--delay",
+        "3",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("delay-free reference"));
+    let out = dhrl(&[
+        "train",
+        "--eval-episodes",
+        "0",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("eval_episodes must be at least 1, got 0")
+    );
+    assert!(
+        !run.exists(),
+        "nothing is written for a rejected configuration"
+    );
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, "task = \"half-cheetah\"\nstepz = 5\n").unwrap();
+    let out = dhrl(&[
+        "train",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("unknown field `stepz`"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
