@@ -254,6 +254,7 @@ pub fn bench_update(
     delay: usize,
     batch_size: usize,
     device: crate::learn::LearnDevice,
+    lifting: crate::algos::Lifting,
     updates: usize,
 ) -> Result<UpdateBenchReport, crate::learn::LearnError> {
     use crate::algos::{AgentSpec, Hyper, build_agent};
@@ -271,7 +272,7 @@ pub fn bench_update(
         action_high: model.action_high.clone(),
     };
     let devices = crate::learn::Devices::new(device)?;
-    let mut agent = build_agent(algo, &spec, &Hyper::default(), &devices, 0);
+    let mut agent = build_agent(algo, &spec, &Hyper::default(), &lifting, &devices, 0);
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let mut random = |n: usize| {
         (0..n)

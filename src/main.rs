@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 
-use dhrl::algos::Algo;
+use dhrl::algos::{Algo, Lifting};
 use dhrl::bench::{bench_delay, bench_env, bench_update};
 use dhrl::delay::{DelayArgs, DelayConfig};
 use dhrl::learn::LearnDevice;
@@ -78,6 +78,12 @@ struct TrainArgs {
     /// Keep α fixed instead of learning it.
     #[arg(long)]
     fixed_alpha: bool,
+    /// D2HPG's lifting weight λ.
+    #[arg(long)]
+    lifting_weight: Option<f64>,
+    /// D2HPG's lifting samples K per state (≥ 2).
+    #[arg(long)]
+    lifting_samples: Option<usize>,
     #[arg(long, value_enum)]
     device: Option<LearnDevice>,
     /// TOML file with any fields of config.toml; flags override it.
@@ -100,6 +106,9 @@ struct EvalArgs {
     /// Evaluate under other delay options than the run's.
     #[command(flatten)]
     delay: DelayArgs,
+    /// Evaluate D2HPG's delay-free policy in the undelayed task instead of the regular one.
+    #[arg(long)]
+    delay_free_policy: bool,
     #[arg(long, default_value_t = 12345)]
     seed: u64,
 }
@@ -148,6 +157,12 @@ struct BenchUpdateArgs {
     /// Updates to time.
     #[arg(long, default_value_t = 200)]
     updates: usize,
+    /// D2HPG's lifting weight λ.
+    #[arg(long, default_value_t = Lifting::default().weight)]
+    lifting_weight: f64,
+    /// D2HPG's lifting samples K per state.
+    #[arg(long, default_value_t = Lifting::default().samples)]
+    lifting_samples: usize,
     #[arg(long)]
     json: bool,
 }
@@ -228,6 +243,8 @@ fn train_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     c.batch_size = args.batch_size.unwrap_or(c.batch_size);
     c.hyper.initial_alpha = args.alpha.unwrap_or(c.hyper.initial_alpha);
     c.hyper.autotune_alpha &= !args.fixed_alpha;
+    c.lifting.weight = args.lifting_weight.unwrap_or(c.lifting.weight);
+    c.lifting.samples = args.lifting_samples.unwrap_or(c.lifting.samples);
     c.device = args.device.unwrap_or(c.device);
     Ok(c)
 }
@@ -302,7 +319,13 @@ fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let result = evaluate_saved(&args.run, args.episodes, delay, args.seed)?;
+    let result = evaluate_saved(
+        &args.run,
+        args.episodes,
+        delay,
+        args.delay_free_policy,
+        args.seed,
+    )?;
     println!(
         "return {:.2} ± {:.2} over {} episodes (mean length {:.1})",
         result.return_mean, result.return_std, result.episodes, result.length_mean
@@ -344,12 +367,17 @@ fn run_rollout(args: &RolloutArgs) -> anyhow::Result<()> {
 }
 
 fn run_bench_update(args: &BenchUpdateArgs) -> anyhow::Result<()> {
+    let lifting = Lifting {
+        weight: args.lifting_weight,
+        samples: args.lifting_samples,
+    };
     let report = bench_update(
         args.algo,
         args.task,
         args.delay,
         args.batch_size,
         args.device,
+        lifting,
         args.updates,
     )?;
     if args.json {

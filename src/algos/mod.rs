@@ -7,6 +7,8 @@
 //! SAC) and learners on `x` train from the same replay.
 
 mod augmented_sac;
+mod bpql;
+mod d2hpg;
 mod naive_sac;
 mod sac;
 
@@ -17,7 +19,9 @@ use serde::{Deserialize, Serialize};
 use crate::delay::Transitions;
 use crate::learn::{Devices, LearnError};
 
-pub use sac::{InputView, SacAgent, SacLearner, SacStats};
+pub use bpql::Bpql;
+pub use d2hpg::{D2hpg, Lifting, Regular, delay_free_seed};
+pub use sac::{InputView, SacAgent, SacBatch, SacLearner, SacStats};
 
 /// The algorithms `dhrl train --algo` accepts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -30,6 +34,12 @@ pub enum Algo {
     NaiveSac,
     /// SAC with actor and critic on the augmented state `x_t`.
     AugmentedSac,
+    /// Actor on `x_t`, "beta" critic on the time-aligned true state.
+    Bpql,
+    /// Delay-free SAC plus a regular policy trained by the lifting loss only.
+    D2hpgNaive,
+    /// The paper's D2HPG(-BPQL): BPQL, a delay-free SAC, and the lifting loss.
+    D2hpg,
 }
 
 impl Algo {
@@ -38,7 +48,20 @@ impl Algo {
             Algo::Sac => "sac",
             Algo::NaiveSac => "naive-sac",
             Algo::AugmentedSac => "augmented-sac",
+            Algo::Bpql => "bpql",
+            Algo::D2hpgNaive => "d2hpg-naive",
+            Algo::D2hpg => "d2hpg",
         }
+    }
+}
+
+impl Algo {
+    /// Whether the acting policy's input is the augmented state `x_t` (its size grows with Δ).
+    pub fn acts_on_augmented_state(self) -> bool {
+        matches!(
+            self,
+            Algo::AugmentedSac | Algo::Bpql | Algo::D2hpgNaive | Algo::D2hpg
+        )
     }
 }
 
@@ -107,6 +130,11 @@ pub enum ActMode {
 pub trait Agent {
     /// Actions `[rows, act_dim]` for `rows` augmented states `[rows, obs + Δ·act]`.
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32>;
+    /// Deterministic actions of a delay-free policy for `rows` true states `[rows, obs]`, for
+    /// algorithms that learn one (D2HPG's abstract policy), evaluated undelayed.
+    fn act_delay_free(&mut self, _states: &[f32], _rows: usize) -> Option<Vec<f32>> {
+        None
+    }
     /// One gradient update of every learner from a batch; returns named statistics.
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)>;
     /// Networks, optimiser states and random streams, into `dir`.
@@ -115,16 +143,33 @@ pub trait Agent {
     fn load(&mut self, dir: &Path) -> Result<(), LearnError>;
 }
 
-/// Builds the agent of `algo`.
+/// Builds the agent of `algo` (`lifting` is used by the D2HPG variants only).
 pub fn build_agent(
     algo: Algo,
     spec: &AgentSpec,
     hyper: &Hyper,
+    lifting: &Lifting,
     devices: &Devices,
     seed: u64,
 ) -> Box<dyn Agent> {
-    devices.train.seed(seed);
     match algo {
+        Algo::Bpql => Box::new(Bpql::new(spec, hyper, devices, seed)),
+        Algo::D2hpgNaive => Box::new(D2hpg::new(
+            Regular::LiftingOnly,
+            *lifting,
+            spec,
+            hyper,
+            devices,
+            seed,
+        )),
+        Algo::D2hpg => Box::new(D2hpg::new(
+            Regular::Bpql,
+            *lifting,
+            spec,
+            hyper,
+            devices,
+            seed,
+        )),
         Algo::Sac => Box::new(sac::delay_free_sac(spec, hyper, devices, seed)),
         Algo::NaiveSac => Box::new(naive_sac::naive_sac(spec, hyper, devices, seed)),
         Algo::AugmentedSac => Box::new(augmented_sac::augmented_sac(spec, hyper, devices, seed)),

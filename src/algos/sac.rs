@@ -59,7 +59,21 @@ fn load_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
     }
 }
 
-/// SAC on inputs of a fixed width.
+/// One SAC batch: what the actor and the critics condition on (the same for SAC itself; the
+/// augmented state for the actor and the true state for the critics in BPQL), now and next.
+/// All `[B, ·]` tensors on the plain device; `done` is 1 where the MDP terminated.
+#[derive(Debug, Clone)]
+pub struct SacBatch {
+    pub actor_input: Tensor<2>,
+    pub critic_input: Tensor<2>,
+    pub action: Tensor<2>,
+    pub reward: Tensor<2>,
+    pub next_actor_input: Tensor<2>,
+    pub next_critic_input: Tensor<2>,
+    pub done: Tensor<2>,
+}
+
+/// SAC with a policy `π(a | actor input)` and twin critics `Q(critic input, a)`.
 pub struct SacLearner {
     pub actor: GaussianPolicy,
     pub critic: TwinQ,
@@ -79,16 +93,20 @@ pub struct SacLearner {
 }
 
 impl SacLearner {
+    /// Networks drawn from burn's generator seeded with `seed` (so a learner is reproducible
+    /// whatever was built before it), exploration noise from its own stream.
     pub fn new(
-        input_dim: usize,
+        actor_dim: usize,
+        critic_dim: usize,
         spec: &AgentSpec,
         hyper: &Hyper,
         devices: &Devices,
         seed: u64,
     ) -> SacLearner {
-        let actor = GaussianPolicy::new(input_dim, spec.act_dim, &devices.train);
+        devices.train.seed(seed);
+        let actor = GaussianPolicy::new(actor_dim, spec.act_dim, &devices.train);
         materialize(&actor);
-        let critic = TwinQ::new(input_dim, spec.act_dim, &devices.train);
+        let critic = TwinQ::new(critic_dim, spec.act_dim, &devices.train);
         materialize(&critic);
         SacLearner {
             target: critic.valid(),
@@ -119,67 +137,126 @@ impl SacLearner {
         self.actor.valid().mode(input, &self.scale)
     }
 
-    /// One update of critics, actor, temperature and target critics. Inputs are `[B, ·]`
-    /// tensors on the plain device; `done` is 1 where the MDP terminated.
-    pub fn update(
-        &mut self,
-        input: Tensor<2>,
-        action: Tensor<2>,
-        reward: Tensor<2>,
-        next_input: Tensor<2>,
-        done: Tensor<2>,
-    ) -> SacStats {
-        let (batch, plain) = (input.dims()[0], self.devices.plain.clone());
-        let (gamma, lr) = (self.hyper.gamma, self.hyper.learning_rate);
+    /// Critics (Eq. 3, 5): `y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|x'))`, `a' ~ π(·|x')`.
+    /// Returns the loss.
+    pub fn update_critics(&mut self, batch: &SacBatch) -> f64 {
+        let rows = batch.reward.dims()[0];
         let alpha = self.temperature.alpha();
-
-        // Critics (Eq. 3, 5): y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|s')), a' ~ π(·|s').
-        let next_eps = self.noise.normal(batch, self.act_dim, &plain);
+        let next_eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
         let next = self
             .actor
             .valid()
-            .sample(next_input.clone(), next_eps, &self.scale);
-        let next_q = self.target.min(next_input, next.action);
-        let y = critic_target(reward, done, next_q, next.log_prob, alpha, gamma);
-        let q1 = self.critic.q1.forward(input.clone(), action.clone());
-        let q2 = self.critic.q2.forward(input.clone(), action);
-        let loss_q = critic_loss(q1, q2, y);
-        let critic_loss_value = f64::from(loss_q.clone().inner().into_scalar::<f32>());
-        let grads = GradientsParams::from_grads(loss_q.backward(), &self.critic);
-        self.critic = self.critic_opt.step(lr, self.critic.clone(), grads);
-
-        // Actor (Eq. 7): α log π(a|s) − min Q(s, a), a ~ π(·|s), critics held fixed.
-        let eps = self.noise.normal(batch, self.act_dim, &plain);
-        let pi = self.actor.sample(input.clone(), eps, &self.scale);
-        let mean_log_prob = f64::from(pi.log_prob.clone().inner().mean().into_scalar::<f32>());
-        let q = self.critic.valid().min(input, pi.action);
-        let loss_pi = actor_loss(pi.log_prob, q, alpha);
-        let actor_loss_value = f64::from(loss_pi.clone().inner().into_scalar::<f32>());
-        let grads = GradientsParams::from_grads(loss_pi.backward(), &self.actor);
-        self.actor = self.actor_opt.step(lr, self.actor.clone(), grads);
-
-        // Temperature (Eq. 18): −α(log π + H̄), toward the target entropy.
-        let mut alpha_loss_value = 0.0;
-        if self.hyper.autotune_alpha {
-            let loss_alpha = temperature_loss(
-                self.temperature.log_alpha.val(),
-                mean_log_prob,
-                self.target_entropy,
-            );
-            alpha_loss_value = f64::from(loss_alpha.clone().inner().into_scalar::<f32>());
-            let grads = GradientsParams::from_grads(loss_alpha.backward(), &self.temperature);
-            self.temperature = self
-                .temperature_opt
-                .step(lr, self.temperature.clone(), grads);
-        }
-
-        // Targets: θ̄ ← τθ + (1 − τ)θ̄.
-        self.target = polyak(self.target.clone(), &self.critic, self.hyper.tau);
-        SacStats {
-            critic_loss: critic_loss_value,
-            actor_loss: actor_loss_value,
+            .sample(batch.next_actor_input.clone(), next_eps, &self.scale);
+        let next_q = self
+            .target
+            .min(batch.next_critic_input.clone(), next.action);
+        let y = critic_target(
+            batch.reward.clone(),
+            batch.done.clone(),
+            next_q,
+            next.log_prob,
             alpha,
-            alpha_loss: alpha_loss_value,
+            self.hyper.gamma,
+        );
+        let q1 = self
+            .critic
+            .q1
+            .forward(batch.critic_input.clone(), batch.action.clone());
+        let q2 = self
+            .critic
+            .q2
+            .forward(batch.critic_input.clone(), batch.action.clone());
+        let loss = critic_loss(q1, q2, y);
+        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
+        let grads = GradientsParams::from_grads(loss.backward(), &self.critic);
+        self.critic = self
+            .critic_opt
+            .step(self.hyper.learning_rate, self.critic.clone(), grads);
+        value
+    }
+
+    /// Actor (Eq. 7): `α log π(a|x) − min Q(s, a)`, `a ~ π(·|x)`, critics held fixed, plus
+    /// `extra(actor)` (a loss on the same actor, e.g. D2HPG's lifting term) in the same step.
+    /// Returns the SAC loss, the extra loss and the batch mean of `log π`.
+    pub fn update_actor(
+        &mut self,
+        batch: &SacBatch,
+        extra: impl FnOnce(&GaussianPolicy) -> Option<Tensor<1>>,
+    ) -> (f64, f64, f64) {
+        let rows = batch.reward.dims()[0];
+        let alpha = self.temperature.alpha();
+        let eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
+        let pi = self
+            .actor
+            .sample(batch.actor_input.clone(), eps, &self.scale);
+        let mean_log_prob = f64::from(pi.log_prob.clone().inner().mean().into_scalar::<f32>());
+        let q = self
+            .critic
+            .valid()
+            .min(batch.critic_input.clone(), pi.action);
+        let loss = actor_loss(pi.log_prob, q, alpha);
+        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
+        let (loss, extra_value) = match extra(&self.actor) {
+            Some(extra) => {
+                let extra_value = f64::from(extra.clone().inner().into_scalar::<f32>());
+                (loss + extra, extra_value)
+            }
+            None => (loss, 0.0),
+        };
+        let grads = GradientsParams::from_grads(loss.backward(), &self.actor);
+        self.actor = self
+            .actor_opt
+            .step(self.hyper.learning_rate, self.actor.clone(), grads);
+        (value, extra_value, mean_log_prob)
+    }
+
+    /// Actor updated by a loss of its own alone (D2HPG-naive's lifting-only regular policy).
+    pub fn update_actor_with(&mut self, loss: impl FnOnce(&GaussianPolicy) -> Tensor<1>) -> f64 {
+        let loss = loss(&self.actor);
+        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
+        let grads = GradientsParams::from_grads(loss.backward(), &self.actor);
+        self.actor = self
+            .actor_opt
+            .step(self.hyper.learning_rate, self.actor.clone(), grads);
+        value
+    }
+
+    /// Temperature (Eq. 18): `−α(log π + H̄)`, toward the target entropy; returns the loss
+    /// (0 when α is fixed).
+    pub fn update_temperature(&mut self, mean_log_prob: f64) -> f64 {
+        if !self.hyper.autotune_alpha {
+            return 0.0;
+        }
+        let loss = temperature_loss(
+            self.temperature.log_alpha.val(),
+            mean_log_prob,
+            self.target_entropy,
+        );
+        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
+        let grads = GradientsParams::from_grads(loss.backward(), &self.temperature);
+        self.temperature =
+            self.temperature_opt
+                .step(self.hyper.learning_rate, self.temperature.clone(), grads);
+        value
+    }
+
+    /// Targets: `θ̄ ← τθ + (1 − τ)θ̄`.
+    pub fn update_targets(&mut self) {
+        self.target = polyak(self.target.clone(), &self.critic, self.hyper.tau);
+    }
+
+    /// One SAC update: critics, actor, temperature, targets.
+    pub fn update(&mut self, batch: &SacBatch) -> SacStats {
+        let alpha = self.temperature.alpha();
+        let critic_loss = self.update_critics(batch);
+        let (actor_loss, _, mean_log_prob) = self.update_actor(batch, |_| None);
+        let alpha_loss = self.update_temperature(mean_log_prob);
+        self.update_targets();
+        SacStats {
+            critic_loss,
+            actor_loss,
+            alpha,
+            alpha_loss,
         }
     }
 
@@ -262,6 +339,35 @@ impl SacLearner {
     }
 }
 
+/// `[rows, len / rows]` on `device`.
+pub(crate) fn rows(values: Vec<f32>, rows: usize, device: &Device) -> Tensor<2> {
+    let cols = values.len() / rows.max(1);
+    matrix(values, rows, cols, device)
+}
+
+/// A [`SacBatch`] of a batch of transitions: actions, rewards and terminations, with the
+/// actor on `x` and the critics on `s` (BPQL's split; the SAC baselines replace the inputs).
+pub(crate) fn transition_tensors(batch: &Transitions, device: &Device) -> SacBatch {
+    let n = batch.len();
+    let (augmented, state) = (
+        rows(batch.augmented.clone(), n, device),
+        rows(batch.state.clone(), n, device),
+    );
+    let (next_augmented, next_state) = (
+        rows(batch.next_augmented.clone(), n, device),
+        rows(batch.next_state.clone(), n, device),
+    );
+    SacBatch {
+        actor_input: augmented,
+        critic_input: state,
+        action: rows(batch.action.clone(), n, device),
+        reward: column(batch.reward.clone(), device),
+        next_actor_input: next_augmented,
+        next_critic_input: next_state,
+        done: column(batch.terminated.iter().map(|&d| d as f32).collect(), device),
+    }
+}
+
 /// Which part of a transition the SAC baselines condition on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum InputView {
@@ -326,7 +432,14 @@ impl SacAgent {
         SacAgent {
             view,
             spec: spec.clone(),
-            learner: SacLearner::new(view.width(spec), spec, hyper, devices, seed),
+            learner: SacLearner::new(
+                view.width(spec),
+                view.width(spec),
+                spec,
+                hyper,
+                devices,
+                seed,
+            ),
         }
     }
 }
@@ -357,17 +470,19 @@ impl Agent for SacAgent {
     }
 
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {
-        let (rows, width, act) = (batch.len(), self.view.width(&self.spec), self.spec.act_dim);
         let plain = self.learner.devices.plain.clone();
         let (input, next_input) = self.view.of_batch(batch, &self.spec);
-        let done = batch.terminated.iter().map(|&d| d as f32).collect();
-        let stats = self.learner.update(
-            matrix(input, rows, width, &plain),
-            matrix(batch.action.clone(), rows, act, &plain),
-            column(batch.reward.clone(), &plain),
-            matrix(next_input, rows, width, &plain),
-            column(done, &plain),
+        let (input, next_input) = (
+            rows(input, batch.len(), &plain),
+            rows(next_input, batch.len(), &plain),
         );
+        let stats = self.learner.update(&SacBatch {
+            actor_input: input.clone(),
+            critic_input: input,
+            next_actor_input: next_input.clone(),
+            next_critic_input: next_input,
+            ..transition_tensors(batch, &plain)
+        });
         vec![
             ("critic_loss", stats.critic_loss),
             ("actor_loss", stats.actor_loss),

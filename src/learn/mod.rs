@@ -10,7 +10,8 @@ mod tensors;
 
 pub use device::{Devices, LearnDevice};
 pub use losses::{
-    actor_loss, critic_loss, critic_target, polyak, squashed_gaussian_log_prob, temperature_loss,
+    actor_loss, critic_loss, critic_target, lifting_loss, polyak, squashed_gaussian_log_prob,
+    temperature_loss,
 };
 pub use nets::{
     ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, PolicySample, QNetwork,

@@ -158,6 +158,16 @@ impl GaussianPolicy {
         }
     }
 
+    /// `K` squashed actions per row, `[B, K, A]`, from `eps` `[B, K, A]`: the trunk runs once
+    /// per state, only the sampling is repeated.
+    pub fn sample_k(&self, input: Tensor<2>, eps: Tensor<3>, scale: &ActionScale) -> Tensor<3> {
+        let (mean, log_std) = self.distribution(input);
+        let (mean, std): (Tensor<3>, Tensor<3>) =
+            (mean.unsqueeze_dim(1), log_std.exp().unsqueeze_dim(1));
+        let u = mean + std * eps;
+        u.tanh() * scale.scale.clone().unsqueeze_dim(1) + scale.bias.clone().unsqueeze_dim(1)
+    }
+
     /// The deterministic action `scale·tanh(μ) + bias` (evaluation).
     pub fn mode(&self, input: Tensor<2>, scale: &ActionScale) -> Tensor<2> {
         let (mean, _) = self.distribution(input);

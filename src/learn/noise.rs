@@ -20,6 +20,17 @@ impl Noise {
         }
     }
 
+    /// A `[rows, k, cols]` tensor of independent N(0, 1) draws.
+    pub fn normal3(&mut self, rows: usize, k: usize, cols: usize, device: &Device) -> Tensor<3> {
+        let values: Vec<f32> = (0..rows * k * cols)
+            .map(|_| StandardNormal.sample(&mut self.rng))
+            .collect();
+        Tensor::from_data(
+            burn::prelude::TensorData::new(values, [rows, k, cols]),
+            device,
+        )
+    }
+
     /// A `[rows, cols]` tensor of independent N(0, 1) draws.
     pub fn normal(&mut self, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
         let values = (0..rows * cols)

@@ -2,7 +2,7 @@
 //! reads, and what the flags override.
 use serde::{Deserialize, Serialize};
 
-use crate::algos::{Algo, Hyper};
+use crate::algos::{Algo, Hyper, Lifting};
 use crate::delay::{DEFAULT_CAPACITY, DelayConfig, DelayError};
 use crate::learn::LearnDevice;
 use crate::tasks::TaskName;
@@ -34,6 +34,8 @@ pub struct TrainConfig {
     pub log_every: u64,
     pub device: LearnDevice,
     pub hyper: Hyper,
+    /// D2HPG's lifting loss (ignored by the other algorithms).
+    pub lifting: Lifting,
 }
 
 impl Default for TrainConfig {
@@ -57,6 +59,7 @@ impl Default for TrainConfig {
             log_every: 1_000,
             device: LearnDevice::Cpu,
             hyper: Hyper::default(),
+            lifting: Lifting::default(),
         }
     }
 }
@@ -172,6 +175,19 @@ impl TrainConfig {
             "initial_alpha",
             "a positive number",
             h.initial_alpha,
+        )?;
+        let l = &self.lifting;
+        check(
+            l.weight >= 0.0 && l.weight.is_finite(),
+            "lifting weight",
+            "a finite number ≥ 0",
+            l.weight,
+        )?;
+        check(
+            l.samples >= 2,
+            "lifting samples",
+            "at least 2 (standard deviations need two samples)",
+            l.samples,
         )?;
         Ok(delay)
     }

@@ -8,6 +8,15 @@ use crate::tasks::TaskName;
 
 use super::TrainError;
 
+/// Which of an agent's policies is evaluated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EvalPolicy {
+    /// The policy that acts on `x_t` in the delayed task.
+    Regular,
+    /// A delay-free policy on the true state (D2HPG's abstract policy); run it with Δ = 0.
+    DelayFree,
+}
+
 /// Mean and spread of evaluation episodes.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EvalResult {
@@ -21,6 +30,7 @@ pub struct EvalResult {
 /// Plays one episode on each of `episodes` fresh copies (seeded by `seed`) under `delay`.
 pub fn evaluate(
     agent: &mut dyn Agent,
+    policy: EvalPolicy,
     task: TaskName,
     delay: &DelayConfig,
     episodes: usize,
@@ -56,7 +66,18 @@ pub fn evaluate(
                 .flat_map(|&i| &layer.augmented()[i * aug..(i + 1) * aug])
                 .copied()
                 .collect();
-            let chosen = agent.act(&inputs, acting.len(), ActMode::Deterministic);
+            let chosen = match policy {
+                EvalPolicy::Regular => agent.act(&inputs, acting.len(), ActMode::Deterministic),
+                EvalPolicy::DelayFree => {
+                    agent.act_delay_free(&inputs, acting.len()).ok_or_else(|| {
+                        TrainError::Config(super::ConfigError::Invalid {
+                            what: "the evaluated policy",
+                            accepted: "a delay-free policy, which only the D2HPG variants learn",
+                            value: "delay-free".into(),
+                        })
+                    })?
+                }
+            };
             for (k, &i) in acting.iter().enumerate() {
                 actions[i * act_dim..(i + 1) * act_dim]
                     .copy_from_slice(&chosen[k * act_dim..(k + 1) * act_dim]);

@@ -8,9 +8,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::checkpoint::{self, read_json, write_binary, write_json};
-use super::eval::{EvalResult, evaluate};
+use super::eval::{EvalPolicy, EvalResult, evaluate};
 use super::logs::{CsvLog, truncate_after};
-use super::{TrainConfig, TrainError, io_error};
+use super::{ConfigError, TrainConfig, TrainError, io_error};
 use crate::algos::{ActMode, Agent, AgentSpec, build_agent};
 use crate::delay::{CpuDelayLayer, DelayConfig, DelayLayout, ReplayStore, StepInput};
 use crate::learn::Devices;
@@ -173,7 +173,14 @@ impl Trainer {
         };
         let replay = ReplayStore::new(layout, config.replay_capacity)?;
         let devices = Devices::new(config.device)?;
-        let agent = build_agent(config.algo, &spec, &config.hyper, &devices, config.seed);
+        let agent = build_agent(
+            config.algo,
+            &spec,
+            &config.hyper,
+            &config.lifting,
+            &devices,
+            config.seed,
+        );
         let state = LoopState {
             env_steps: 0,
             updates: 0,
@@ -328,6 +335,7 @@ impl Trainer {
         let seed = self.config.seed ^ 0xE7A1 ^ (self.state.evals_done << 20);
         let result = evaluate(
             self.agent.as_mut(),
+            EvalPolicy::Regular,
             self.config.task,
             &self.config.delay,
             self.config.eval_episodes,
@@ -410,16 +418,36 @@ impl Trainer {
 }
 
 /// `dhrl eval`: the saved policy of `run` on `episodes` fresh copies, under `delay` (the
-/// run's own delay when `None`).
+/// run's own delay when `None`). With `delay_free_policy`, D2HPG's delay-free policy is
+/// evaluated instead, in the undelayed task.
 pub fn evaluate_saved(
     run: &Path,
     episodes: usize,
     delay: Option<DelayConfig>,
+    delay_free_policy: bool,
     seed: u64,
 ) -> Result<EvalResult, TrainError> {
     let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
-    let delay_config = delay.unwrap_or(config.delay);
-    let total = delay_config.total_delay()?;
+    let trained_delay = config.validate()?;
+    let eval_delay = match (delay_free_policy, delay) {
+        (true, Some(_)) => {
+            return Err(TrainError::Config(ConfigError::Invalid {
+                what: "--delay-free-policy",
+                accepted: "used without delay options (the delay-free policy is evaluated undelayed)",
+                value: "given with delay options".into(),
+            }));
+        }
+        (true, None) => DelayConfig::default(),
+        (false, delay) => delay.unwrap_or(config.delay),
+    };
+    let total = eval_delay.total_delay()?;
+    if !delay_free_policy && total != trained_delay && config.algo.acts_on_augmented_state() {
+        return Err(TrainError::Config(ConfigError::Invalid {
+            what: "the evaluation delay",
+            accepted: "the total delay the policy was trained with, since its input x_t grows with Δ",
+            value: format!("{total} (trained with {trained_delay})"),
+        }));
+    }
     let dir = checkpoint::latest(run)
         .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
     let env = BatchedEnv::new(&BatchConfig {
@@ -429,27 +457,33 @@ pub fn evaluate_saved(
         seed,
         actuator_noise: 0.0,
     })?;
-    let trained_delay = config.validate()?;
-    if total != trained_delay && matches!(config.algo, crate::algos::Algo::AugmentedSac) {
-        return Err(TrainError::Config(super::ConfigError::Invalid {
-            what: "the evaluation delay",
-            accepted: "the delay the augmented policy was trained with (its input size depends on it)",
-            value: total.to_string(),
-        }));
-    }
     let devices = Devices::new(config.device)?;
     let mut agent = build_agent(
         config.algo,
-        &agent_spec(&env, total),
+        &agent_spec(&env, trained_delay),
         &config.hyper,
+        &config.lifting,
         &devices,
         config.seed,
     );
     agent.load(&dir.join("agent"))?;
+    let policy = if delay_free_policy {
+        EvalPolicy::DelayFree
+    } else {
+        EvalPolicy::Regular
+    };
+    if delay_free_policy && agent.act_delay_free(&vec![0.0; env.obs_dim()], 1).is_none() {
+        return Err(TrainError::Config(ConfigError::Invalid {
+            what: "--delay-free-policy",
+            accepted: "a run of d2hpg or d2hpg-naive (the algorithms that learn a delay-free policy)",
+            value: config.algo.to_string(),
+        }));
+    }
     evaluate(
         agent.as_mut(),
+        policy,
         config.task,
-        &delay_config,
+        &eval_delay,
         episodes,
         config.threads,
         seed,
