@@ -15,7 +15,7 @@ use std::path::Path;
 use super::sac::{SacLearner, transition_tensors};
 use super::{ActMode, Agent, AgentSpec, Hyper};
 use crate::delay::Transitions;
-use crate::learn::{Devices, LearnError, matrix, to_vec};
+use crate::learn::{Devices, LearnError};
 
 pub struct Bpql {
     spec: AgentSpec,
@@ -40,28 +40,14 @@ impl Bpql {
 
 impl Agent for Bpql {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let input = matrix(
-            augmented[..rows * self.spec.augmented_dim()].to_vec(),
-            rows,
-            self.spec.augmented_dim(),
-            &self.learner.devices.plain,
-        );
-        to_vec(match mode {
-            ActMode::Explore => self.learner.explore(input),
-            ActMode::Deterministic => self.learner.exploit(input),
-        })
+        self.learner.act(augmented, rows, self.spec.augmented_dim(), mode)
     }
 
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {
         let stats = self
             .learner
             .update(&transition_tensors(batch, &self.learner.devices.plain));
-        vec![
-            ("critic_loss", stats.critic_loss),
-            ("actor_loss", stats.actor_loss),
-            ("alpha", stats.alpha),
-            ("alpha_loss", stats.alpha_loss),
-        ]
+        stats.named()
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use super::sac::{SacBatch, SacLearner, transition_tensors};
 use super::{ActMode, Agent, AgentSpec, Hyper};
 use crate::delay::Transitions;
-use crate::learn::{Devices, GaussianPolicy, LearnError, Noise, lifting_loss, matrix, to_vec};
+use crate::learn::{Devices, GaussianPolicy, LearnError, Noise, lifting_loss};
 
 /// How strongly, and from how many samples, the regular policy is lifted.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -107,24 +107,11 @@ impl D2hpg {
 
 impl Agent for D2hpg {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let plain = self.regular.devices.plain.clone();
-        let aug = self.spec.augmented_dim();
-        let input = matrix(augmented[..rows * aug].to_vec(), rows, aug, &plain);
-        to_vec(match mode {
-            ActMode::Explore => self.regular.explore(input),
-            ActMode::Deterministic => self.regular.exploit(input),
-        })
+        self.regular.act(augmented, rows, self.spec.augmented_dim(), mode)
     }
 
     fn act_delay_free(&mut self, states: &[f32], rows: usize) -> Option<Vec<f32>> {
-        let obs = self.spec.obs_dim;
-        let input = matrix(
-            states[..rows * obs].to_vec(),
-            rows,
-            obs,
-            &self.delay_free.devices.plain,
-        );
-        Some(to_vec(self.delay_free.exploit(input)))
+        Some(self.delay_free.act(states, rows, self.spec.obs_dim, ActMode::Deterministic))
     }
 
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {

@@ -27,6 +27,18 @@ pub struct SacStats {
     pub alpha_loss: f64,
 }
 
+impl SacStats {
+    /// The statistics as `train.csv` columns.
+    pub fn named(&self) -> Vec<(&'static str, f64)> {
+        vec![
+            ("critic_loss", self.critic_loss),
+            ("actor_loss", self.actor_loss),
+            ("alpha", self.alpha),
+            ("alpha_loss", self.alpha_loss),
+        ]
+    }
+}
+
 /// Forces burn's lazily initialised parameters to draw their values now, in declaration
 /// order, so that a seed fixes them.
 pub(crate) fn materialize<M: Module>(module: &M) {
@@ -135,6 +147,15 @@ impl SacLearner {
     /// The deterministic action `tanh(μ)` per row.
     pub fn exploit(&self, input: Tensor<2>) -> Tensor<2> {
         self.actor.valid().mode(input, &self.scale)
+    }
+
+    /// Actions `[rows, act_dim]` for `rows` inputs of width `width` (row-major).
+    pub fn act(&mut self, inputs: &[f32], rows: usize, width: usize, mode: ActMode) -> Vec<f32> {
+        let input = matrix(inputs[..rows * width].to_vec(), rows, width, &self.devices.plain);
+        to_vec(match mode {
+            ActMode::Explore => self.explore(input),
+            ActMode::Deterministic => self.exploit(input),
+        })
     }
 
     /// Critics (Eq. 3, 5): `y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|x'))`, `a' ~ π(·|x')`.
@@ -456,17 +477,8 @@ impl Agent for SacAgent {
             InputView::TrueState => InputView::LastObservation,
             view => view,
         };
-        let width = view.width(&self.spec);
-        let input = matrix(
-            view.from_augmented(augmented, rows, &self.spec),
-            rows,
-            width,
-            &self.learner.devices.plain,
-        );
-        to_vec(match mode {
-            ActMode::Explore => self.learner.explore(input),
-            ActMode::Deterministic => self.learner.exploit(input),
-        })
+        let inputs = view.from_augmented(augmented, rows, &self.spec);
+        self.learner.act(&inputs, rows, view.width(&self.spec), mode)
     }
 
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {
@@ -483,12 +495,7 @@ impl Agent for SacAgent {
             next_critic_input: next_input,
             ..transition_tensors(batch, &plain)
         });
-        vec![
-            ("critic_loss", stats.critic_loss),
-            ("actor_loss", stats.actor_loss),
-            ("alpha", stats.alpha),
-            ("alpha_loss", stats.alpha_loss),
-        ]
+        stats.named()
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {

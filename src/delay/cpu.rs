@@ -78,13 +78,7 @@ impl CpuDelayLayer {
         action_high: &[f64],
         seed: u64,
     ) -> Result<CpuDelayLayer, DelayError> {
-        let delay = config.total_delay()?;
-        let layout = DelayLayout {
-            copies,
-            obs_dim,
-            act_dim: action_low.len(),
-            delay,
-        };
+        let layout = DelayLayout::for_config(config, copies, obs_dim, action_low.len())?;
         Ok(CpuDelayLayer {
             layout,
             warmup: WarmupFiller::new(config.warmup, action_low, action_high, seed),

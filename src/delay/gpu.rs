@@ -84,13 +84,8 @@ impl GpuDelayLayer {
         action_high: &[f64],
         seed: u64,
     ) -> Result<GpuDelayLayer, GpuError> {
-        let delay = config.total_delay()?;
-        let layout = DelayLayout {
-            copies,
-            obs_dim,
-            act_dim: action_low.len(),
-            delay,
-        };
+        let layout = DelayLayout::for_config(config, copies, obs_dim, action_low.len())?;
+        let delay = layout.delay;
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {

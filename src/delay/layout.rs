@@ -1,6 +1,8 @@
 //! Sizes and buffer layout shared by the CPU and GPU implementations.
 use bytemuck::{Pod, Zeroable};
 
+use super::{DelayConfig, DelayError};
+
 /// Flag: the step of this record ended the MDP (`terminated_{τ+1}`; no bootstrapping).
 pub const RECORD_TERMINATED: u32 = 1;
 /// Flag: the step of this record hit the time limit (bootstrap from `s_{τ+1}`).
@@ -49,6 +51,11 @@ pub struct DelayLayout {
 }
 
 impl DelayLayout {
+    /// The layout of `copies` copies under `config` (checked: see [`DelayConfig::total_delay`]).
+    pub fn for_config(config: &DelayConfig, copies: usize, obs_dim: usize, act_dim: usize) -> Result<DelayLayout, DelayError> {
+        Ok(DelayLayout { copies, obs_dim, act_dim, delay: config.total_delay()? })
+    }
+
     /// `obs_dim + Δ·act_dim`.
     pub fn augmented_dim(&self) -> usize {
         self.obs_dim + self.delay * self.act_dim

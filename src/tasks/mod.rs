@@ -174,6 +174,13 @@ fn put_clipped(out: &mut [f64], at: &mut usize, src: &[f64], limit: f64) {
     *at += src.len();
 }
 
+/// qpos[1:] ++ clip(qvel, ±10): the observation of Hopper and Walker2d.
+fn observe_planar_walker(data: &SimData, out: &mut [f64]) {
+    let mut at = 0;
+    put(out, &mut at, &data.qpos()[1..]);
+    put_clipped(out, &mut at, data.qvel(), 10.0);
+}
+
 /// `lo < v < hi`, false for NaN (as NumPy's comparisons).
 fn strictly_between(v: f64, lo: f64, hi: f64) -> bool {
     lo < v && v < hi

@@ -1,5 +1,5 @@
 //! Walker2d-v4: walk forward without falling.
-use super::{Progress, ResetNoise, SimData, TaskDef, TaskName, put, put_clipped, strictly_between};
+use super::{observe_planar_walker, strictly_between, Progress, ResetNoise, SimData, TaskDef, TaskName};
 
 pub static WALKER2D: TaskDef = TaskDef {
     name: TaskName::Walker2d,
@@ -12,16 +12,10 @@ pub static WALKER2D: TaskDef = TaskDef {
     forward_weight: 1.0,
     healthy_reward: 1.0,
     ctrl_cost_weight: 1e-3,
-    observe,
+    observe: observe_planar_walker,
     terminated,
 };
 
-/// qpos[1:] ++ clip(qvel, ±10).
-fn observe(data: &SimData, out: &mut [f64]) {
-    let mut at = 0;
-    put(out, &mut at, &data.qpos()[1..]);
-    put_clipped(out, &mut at, data.qvel(), 10.0);
-}
 
 /// Unhealthy unless 0.8 < z < 2.0 and −1 < angle < 1.
 fn terminated(data: &SimData) -> bool {

@@ -45,7 +45,7 @@ impl Default for TrainConfig {
             task: TaskName::InvertedPendulum,
             algo: Algo::Sac,
             delay: DelayConfig::default(),
-            steps: 15_000,
+            steps: 20_000,
             seed: 0,
             envs: 1,
             threads: 1,
