@@ -12,7 +12,7 @@ use dhrl::learn::LearnDevice;
 use dhrl::rollout::{read_actions, read_state, rollout};
 use dhrl::tabular::{TabularArgs, TabularBenchArgs, run_tabular, run_tabular_bench};
 use dhrl::tasks::TaskName;
-use dhrl::train::{Start, TrainConfig, evaluate_saved, train};
+use dhrl::train::{Start, TrainConfig, evaluate_saved, plot_curves, summarize_runs, train};
 
 #[derive(Parser)]
 #[command(
@@ -31,6 +31,9 @@ enum Command {
     Train(Box<TrainArgs>),
     /// Evaluate the saved policy of a run.
     Eval(EvalArgs),
+    /// Learning curves of finished runs (grouped by task, algorithm and delay) as SVG, and a
+    /// table of their final evaluations.
+    Plot(PlotArgs),
     /// Trace one episode from a given state and action sequence, one JSON object per line.
     Rollout(RolloutArgs),
     /// Measure throughput.
@@ -95,6 +98,17 @@ struct TrainArgs {
     /// Continue the run in DIR from its last checkpoint (with --steps to extend it).
     #[arg(long, value_name = "DIR")]
     resume: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct PlotArgs {
+    /// Run folders written by `dhrl train`.
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    #[arg(long, value_name = "FILE.svg")]
+    out: PathBuf,
+    #[arg(long, default_value = "Evaluation return")]
+    title: String,
 }
 
 #[derive(Args)]
@@ -214,6 +228,7 @@ fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Train(args) => run_train(&args),
         Command::Eval(args) => run_eval(&args),
+        Command::Plot(args) => run_plot(&args),
         Command::Rollout(args) => run_rollout(&args),
         Command::Bench(BenchCommand::Env(args)) => run_bench_env(&args),
         Command::Bench(BenchCommand::Delay(args)) => run_bench_delay(&args),
@@ -310,6 +325,25 @@ fn run_train(args: &TrainArgs) -> anyhow::Result<()> {
             summary.env_steps, summary.updates, summary.wall_seconds
         ),
     }
+    Ok(())
+}
+
+fn run_plot(args: &PlotArgs) -> anyhow::Result<()> {
+    let curves = summarize_runs(&args.runs)?;
+    println!("| runs | seeds | final step | final return (mean ± std) |");
+    println!("|---|---|---|---|");
+    for curve in &curves {
+        if let Some((step, mean, std)) = curve.last() {
+            let seeds: Vec<String> = curve.seeds.iter().map(u64::to_string).collect();
+            println!(
+                "| {} | {} | {step} | {mean:.1} ± {std:.1} |",
+                curve.label,
+                seeds.join(", ")
+            );
+        }
+    }
+    plot_curves(&curves, &args.title, &args.out)?;
+    println!("plot: {}", args.out.display());
     Ok(())
 }
 

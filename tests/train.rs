@@ -87,6 +87,21 @@ fn sac_clearly_beats_a_random_policy_on_inverted_pendulum() {
     );
     let eval = ok(dhrl(&["eval", run.to_str().unwrap(), "--episodes", "3"]));
     assert!(eval.starts_with("return "), "{eval}");
+    let svg = dir.path().join("curves.svg");
+    let table = ok(dhrl(&[
+        "plot",
+        run.to_str().unwrap(),
+        "--out",
+        svg.to_str().unwrap(),
+    ]));
+    let last = returns.last().unwrap();
+    assert!(
+        table.contains(&format!(
+            "| inverted-pendulum sac Δ=0 | 1 | 3000 | {last:.1} ±"
+        )),
+        "{table}"
+    );
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
     assert!(
         std::fs::read_to_string(run.join("config.toml"))
             .unwrap()

@@ -40,7 +40,8 @@ impl Bpql {
 
 impl Agent for Bpql {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.learner.act(augmented, rows, self.spec.augmented_dim(), mode)
+        self.learner
+            .act(augmented, rows, self.spec.augmented_dim(), mode)
     }
 
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {

@@ -107,11 +107,15 @@ impl D2hpg {
 
 impl Agent for D2hpg {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.regular.act(augmented, rows, self.spec.augmented_dim(), mode)
+        self.regular
+            .act(augmented, rows, self.spec.augmented_dim(), mode)
     }
 
     fn act_delay_free(&mut self, states: &[f32], rows: usize) -> Option<Vec<f32>> {
-        Some(self.delay_free.act(states, rows, self.spec.obs_dim, ActMode::Deterministic))
+        Some(
+            self.delay_free
+                .act(states, rows, self.spec.obs_dim, ActMode::Deterministic),
+        )
     }
 
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {

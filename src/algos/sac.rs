@@ -151,7 +151,12 @@ impl SacLearner {
 
     /// Actions `[rows, act_dim]` for `rows` inputs of width `width` (row-major).
     pub fn act(&mut self, inputs: &[f32], rows: usize, width: usize, mode: ActMode) -> Vec<f32> {
-        let input = matrix(inputs[..rows * width].to_vec(), rows, width, &self.devices.plain);
+        let input = matrix(
+            inputs[..rows * width].to_vec(),
+            rows,
+            width,
+            &self.devices.plain,
+        );
         to_vec(match mode {
             ActMode::Explore => self.explore(input),
             ActMode::Deterministic => self.exploit(input),
@@ -478,7 +483,8 @@ impl Agent for SacAgent {
             view => view,
         };
         let inputs = view.from_augmented(augmented, rows, &self.spec);
-        self.learner.act(&inputs, rows, view.width(&self.spec), mode)
+        self.learner
+            .act(&inputs, rows, view.width(&self.spec), mode)
     }
 
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {

@@ -52,8 +52,18 @@ pub struct DelayLayout {
 
 impl DelayLayout {
     /// The layout of `copies` copies under `config` (checked: see [`DelayConfig::total_delay`]).
-    pub fn for_config(config: &DelayConfig, copies: usize, obs_dim: usize, act_dim: usize) -> Result<DelayLayout, DelayError> {
-        Ok(DelayLayout { copies, obs_dim, act_dim, delay: config.total_delay()? })
+    pub fn for_config(
+        config: &DelayConfig,
+        copies: usize,
+        obs_dim: usize,
+        act_dim: usize,
+    ) -> Result<DelayLayout, DelayError> {
+        Ok(DelayLayout {
+            copies,
+            obs_dim,
+            act_dim,
+            delay: config.total_delay()?,
+        })
     }
 
     /// `obs_dim + Δ·act_dim`.

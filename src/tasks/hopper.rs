@@ -1,5 +1,7 @@
 //! Hopper-v4: hop forward without falling.
-use super::{observe_planar_walker, strictly_between, Progress, ResetNoise, SimData, TaskDef, TaskName};
+use super::{
+    Progress, ResetNoise, SimData, TaskDef, TaskName, observe_planar_walker, strictly_between,
+};
 
 pub static HOPPER: TaskDef = TaskDef {
     name: TaskName::Hopper,
@@ -15,7 +17,6 @@ pub static HOPPER: TaskDef = TaskDef {
     observe: observe_planar_walker,
     terminated,
 };
-
 
 /// Unhealthy unless qpos[2:] and qvel lie in (−100, 100), z > 0.7 and |angle| < 0.2.
 fn terminated(data: &SimData) -> bool {

@@ -1,5 +1,7 @@
 //! Walker2d-v4: walk forward without falling.
-use super::{observe_planar_walker, strictly_between, Progress, ResetNoise, SimData, TaskDef, TaskName};
+use super::{
+    Progress, ResetNoise, SimData, TaskDef, TaskName, observe_planar_walker, strictly_between,
+};
 
 pub static WALKER2D: TaskDef = TaskDef {
     name: TaskName::Walker2d,
@@ -15,7 +17,6 @@ pub static WALKER2D: TaskDef = TaskDef {
     observe: observe_planar_walker,
     terminated,
 };
-
 
 /// Unhealthy unless 0.8 < z < 2.0 and −1 < angle < 1.
 fn terminated(data: &SimData) -> bool {

@@ -4,11 +4,13 @@
 
 mod checkpoint;
 mod config;
+mod curves;
 mod eval;
 mod logs;
 mod run;
 
 pub use config::{ConfigError, TrainConfig};
+pub use curves::{CurveSummary, plot_curves, summarize_runs};
 pub use eval::{EvalResult, evaluate};
 pub use run::{Start, TrainSummary, evaluate_saved, train};
 
