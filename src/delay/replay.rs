@@ -88,26 +88,50 @@ impl ReplayStore {
             * size_of::<f32>()
     }
 
-    /// Writes every stored step.
+    /// Writes the stored steps only (not the empty capacity), each copy's oldest first.
     pub fn save(&self, out: &mut impl std::io::Write) -> Result<(), SnapshotError> {
-        let head: Vec<u64> = self.head.iter().map(|&h| h as u64).collect();
+        let stride = self.layout.stride();
         let filled: Vec<u64> = self.filled.iter().map(|&f| f as u64).collect();
-        write_section(out, &head)?;
         write_section(out, &filled)?;
-        write_section(out, &self.meta)?;
-        write_section(out, &self.data)
+        for c in 0..self.layout.copies {
+            let slots: Vec<usize> = (0..self.filled[c]).map(|i| self.slot(c, i)).collect();
+            let meta: Vec<StepMeta> = slots.iter().map(|&s| self.meta[s]).collect();
+            let data: Vec<f32> = slots
+                .iter()
+                .flat_map(|&s| &self.data[s * stride..(s + 1) * stride])
+                .copied()
+                .collect();
+            write_section(out, &meta)?;
+            write_section(out, &data)?;
+        }
+        Ok(())
     }
 
-    /// Restores what [`ReplayStore::save`] wrote for a store of the same layout and capacity.
+    /// Restores what [`ReplayStore::save`] wrote for a store of the same layout and capacity:
+    /// the same steps in the same order, so sampling continues exactly.
     pub fn load(&mut self, input: &mut impl std::io::Read) -> Result<(), SnapshotError> {
-        let mut head = vec![0u64; self.head.len()];
+        let stride = self.layout.stride();
         let mut filled = vec![0u64; self.filled.len()];
-        read_section(input, "replay heads", &mut head)?;
         read_section(input, "replay fill counts", &mut filled)?;
-        read_section(input, "replay metadata", &mut self.meta)?;
-        read_section(input, "replay steps", &mut self.data)?;
-        self.head = head.into_iter().map(|h| h as usize).collect();
-        self.filled = filled.into_iter().map(|f| f as usize).collect();
+        for (c, &count) in filled.iter().enumerate() {
+            let count = count as usize;
+            if count > self.segment {
+                return Err(SnapshotError::Mismatch {
+                    what: "replay steps of one copy",
+                    found: count,
+                    expected: self.segment,
+                });
+            }
+            let base = c * self.segment;
+            read_section(input, "replay metadata", &mut self.meta[base..base + count])?;
+            read_section(
+                input,
+                "replay steps",
+                &mut self.data[base * stride..(base + count) * stride],
+            )?;
+            self.filled[c] = count;
+            self.head[c] = count % self.segment;
+        }
         Ok(())
     }
 
