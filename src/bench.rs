@@ -67,6 +67,25 @@ pub fn raw_mj_step_rate(task: TaskName, env_steps: usize) -> Result<f64, SimErro
     Ok(env_steps as f64 / start.elapsed().as_secs_f64())
 }
 
+/// A batch without actuator noise and 16 rows of random actions to cycle through.
+fn noiseless_batch(
+    task: TaskName,
+    envs: usize,
+    threads: usize,
+    seed: u64,
+) -> Result<(BatchedEnv, ActionTable), SimError> {
+    let batch = BatchedEnv::new(&BatchConfig {
+        task,
+        envs,
+        threads,
+        seed,
+        actuator_noise: 0.0,
+    })?;
+    let (low, high) = batch.action_bounds();
+    let actions = ActionTable::uniform(low, high, envs, 16, seed);
+    Ok((batch, actions))
+}
+
 /// The figures `dhrl bench env` prints.
 #[derive(Debug, Clone, Serialize)]
 pub struct EnvBenchReport {
@@ -91,15 +110,7 @@ pub fn bench_env(
     steps: usize,
     seed: u64,
 ) -> Result<EnvBenchReport, SimError> {
-    let mut batch = BatchedEnv::new(&BatchConfig {
-        task,
-        envs,
-        threads,
-        seed,
-        actuator_noise: 0.0,
-    })?;
-    let (low, high) = batch.action_bounds();
-    let actions = ActionTable::uniform(low, high, envs, 16, seed);
+    let (mut batch, actions) = noiseless_batch(task, envs, threads, seed)?;
     // Warm up caches and the pool before timing.
     batch.step(actions.row(0))?;
     let mut episodes_finished = 0u64;
@@ -167,18 +178,11 @@ pub fn bench_delay(
     seed: u64,
 ) -> Result<Vec<DelayBenchRow>, BenchError> {
     use crate::delay::{CpuDelayLayer, DelayConfig, GpuDelayLayer, StepInput};
-    let mut batch = BatchedEnv::new(&BatchConfig {
-        task,
-        envs,
-        threads,
-        seed,
-        actuator_noise: 0.0,
-    })?;
+    let (mut batch, actions) = noiseless_batch(task, envs, threads, seed)?;
     let (low, high) = (
         batch.action_bounds().0.to_vec(),
         batch.action_bounds().1.to_vec(),
     );
-    let actions = ActionTable::uniform(&low, &high, envs, 16, seed);
     let obs_dim = batch.obs_dim();
     let mut cpu = Vec::new();
     let mut gpu = Vec::new();
@@ -257,8 +261,7 @@ pub fn bench_update(
     lifting: crate::algos::Lifting,
     updates: usize,
 ) -> Result<UpdateBenchReport, crate::learn::LearnError> {
-    use crate::algos::{AgentSpec, Hyper, build_agent};
-    use crate::delay::Transitions;
+    use crate::algos::{AgentSpec, Hyper, build_agent, random_batch};
     let def = task.def();
     let model = TaskModel::load(task).map_err(|e| crate::learn::LearnError::Load {
         what: task.to_string(),
@@ -273,25 +276,7 @@ pub fn bench_update(
     };
     let devices = crate::learn::Devices::new(device)?;
     let mut agent = build_agent(algo, &spec, &Hyper::default(), &lifting, &devices, 0);
-    let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let mut random = |n: usize| {
-        (0..n)
-            .map(|_| rng.random_range(-1.0f32..1.0))
-            .collect::<Vec<f32>>()
-    };
-    let (b, aug, obs, act) = (batch_size, spec.augmented_dim(), spec.obs_dim, spec.act_dim);
-    let batch = Transitions {
-        copy: vec![0; b],
-        episode: vec![0; b],
-        tau: vec![0; b],
-        augmented: random(b * aug),
-        state: random(b * obs),
-        action: random(b * act),
-        reward: random(b),
-        next_augmented: random(b * aug),
-        next_state: random(b * obs),
-        terminated: vec![0; b],
-    };
+    let batch = random_batch(&spec, batch_size, 1);
     agent.update(&batch); // warm-up: allocations, lazy initialisation
     let start = Instant::now();
     for _ in 0..updates {

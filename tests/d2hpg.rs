@@ -8,7 +8,7 @@ use burn::optim::GradientsParams;
 use burn::prelude::*;
 use dhrl::algos::{
     ActMode, Agent, AgentSpec, Bpql, D2hpg, Hyper, InputView, Lifting, Regular, SacAgent,
-    delay_free_seed,
+    delay_free_seed, random_batch,
 };
 use dhrl::delay::Transitions;
 use dhrl::learn::{ActionScale, Devices, GaussianPolicy, LearnDevice, Noise, lifting_loss, to_vec};
@@ -86,28 +86,8 @@ fn spec(delay: usize) -> AgentSpec {
     }
 }
 
-/// A batch of random transitions of `spec`'s sizes.
 fn batch(spec: &AgentSpec, n: usize, seed: u64) -> Transitions {
-    use rand::{Rng, SeedableRng};
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut random = |len: usize| {
-        (0..len)
-            .map(|_| rng.random_range(-1.0f32..1.0))
-            .collect::<Vec<f32>>()
-    };
-    let (aug, obs, act) = (spec.augmented_dim(), spec.obs_dim, spec.act_dim);
-    Transitions {
-        copy: vec![0; n],
-        episode: vec![0; n],
-        tau: vec![0; n],
-        augmented: random(n * aug),
-        state: random(n * obs),
-        action: random(n * act),
-        reward: random(n),
-        next_augmented: random(n * aug),
-        next_state: random(n * obs),
-        terminated: (0..n).map(|i| u32::from(i % 5 == 0)).collect(),
-    }
+    random_batch(spec, n, seed)
 }
 
 #[test]

@@ -23,6 +23,28 @@ struct FakeBatch {
     max_len: u32,
 }
 
+/// What a fake batch step produced, in the arrays [`StepInput`] borrows.
+struct FakeStep {
+    observations: Vec<f32>,
+    final_observations: Vec<f32>,
+    rewards: Vec<f32>,
+    terminated: Vec<u32>,
+    truncated: Vec<u32>,
+}
+
+impl FakeStep {
+    fn input<'a>(&'a self, actions: &'a [f32]) -> StepInput<'a> {
+        StepInput {
+            actions,
+            observations: &self.observations,
+            final_observations: &self.final_observations,
+            rewards: &self.rewards,
+            terminated: &self.terminated,
+            truncated: &self.truncated,
+        }
+    }
+}
+
 /// The true process of one copy, logged undelayed: per episode, the states, actions, rewards
 /// and how it ended.
 #[derive(Default, Clone, Debug)]
@@ -74,11 +96,7 @@ impl FakeBatch {
     }
 
     /// Steps every copy with `actions`; returns the StepInput arrays and logs into `log`.
-    fn step(
-        &mut self,
-        actions: &[f32],
-        log: &mut [Vec<Episode>],
-    ) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<u32>, Vec<u32>) {
+    fn step(&mut self, actions: &[f32], log: &mut [Vec<Episode>]) -> FakeStep {
         let n = self.episode.len();
         let (mut obs, mut fin, mut rew, mut term, mut trunc) =
             (vec![], vec![], vec![], vec![0; n], vec![0; n]);
@@ -112,7 +130,13 @@ impl FakeBatch {
                 obs.extend(next);
             }
         }
-        (obs, fin, rew, term, trunc)
+        FakeStep {
+            observations: obs,
+            final_observations: fin,
+            rewards: rew,
+            terminated: term,
+            truncated: trunc,
+        }
     }
 }
 
@@ -215,15 +239,8 @@ fn run_cpu(
             .map(|_| rng.random_range(-1.0..1.0))
             .collect();
         layer.fill_warmup(&mut actions).unwrap();
-        let (obs, fin, rew, term, trunc) = fake.step(&actions, &mut log);
-        let input = StepInput {
-            actions: &actions,
-            observations: &obs,
-            final_observations: &fin,
-            rewards: &rew,
-            terminated: &term,
-            truncated: &trunc,
-        };
+        let produced = fake.step(&actions, &mut log);
+        let input = produced.input(&actions);
         layer.step(&input).unwrap();
         replay.push(layer.records()).unwrap();
         key_transitions(&layer.transitions(), aug, obs_dim, act_dim, &mut emitted);
@@ -469,15 +486,8 @@ fn conservative_agent_sees_exactly_max_delay_old_observations() {
     let mut out_of_order = 0;
     for step in 0..80u32 {
         let actions = vec![0.25; 6];
-        let (obs, fin, rew, term, trunc) = fake.step(&actions, &mut log);
-        let input = StepInput {
-            actions: &actions,
-            observations: &obs,
-            final_observations: &fin,
-            rewards: &rew,
-            terminated: &term,
-            truncated: &trunc,
-        };
+        let produced = fake.step(&actions, &mut log);
+        let input = produced.input(&actions);
         random.step(&input).unwrap();
         fixed.step(&input).unwrap();
         assert_eq!(random.augmented(), fixed.augmented(), "step {step}");
@@ -512,6 +522,20 @@ fn record_list(records: &RecordBatch) -> Vec<(usize, [u32; 4], Vec<f32>)> {
             (r.copy, [m.tau, m.episode, m.flags, m.slot], data)
         })
         .collect()
+}
+
+/// Steps both layers with `input` and checks that they agree on augmented states, counters
+/// and records.
+fn step_both(cpu: &mut CpuDelayLayer, gpu: &mut GpuDelayLayer, input: &StepInput<'_>, at: &str) {
+    cpu.step(input).unwrap();
+    gpu.step(input).unwrap();
+    assert_eq!(gpu.read_augmented().unwrap(), cpu.augmented(), "{at}");
+    assert_eq!(gpu.read_counters().unwrap(), cpu.counters(), "{at}");
+    assert_eq!(
+        record_list(&gpu.read_records().unwrap()),
+        record_list(cpu.records()),
+        "{at}"
+    );
 }
 
 fn gpu_layer(
@@ -554,31 +578,13 @@ fn gpu_matches_cpu_on_synthetic_episodes() {
             let actions: Vec<f32> = (0..copies * 2)
                 .map(|_| rng.random_range(-1.0..1.0))
                 .collect();
-            let (obs, fin, rew, term, trunc) = fake.step(&actions, &mut log);
-            let input = StepInput {
-                actions: &actions,
-                observations: &obs,
-                final_observations: &fin,
-                rewards: &rew,
-                terminated: &term,
-                truncated: &trunc,
-            };
-            cpu.step(&input).unwrap();
-            gpu.step(&input).unwrap();
-            assert_eq!(
-                gpu.read_augmented().unwrap(),
-                cpu.augmented(),
-                "Δ {delay} step {step}"
-            );
-            assert_eq!(
-                gpu.read_counters().unwrap(),
-                cpu.counters(),
-                "Δ {delay} step {step}"
-            );
-            assert_eq!(
-                record_list(&gpu.read_records().unwrap()),
-                record_list(cpu.records()),
-                "Δ {delay} step {step}"
+            let produced = fake.step(&actions, &mut log);
+            let input = produced.input(&actions);
+            step_both(
+                &mut cpu,
+                &mut gpu,
+                &input,
+                &format!("Δ {delay} step {step}"),
             );
         }
     }
@@ -614,18 +620,7 @@ fn gpu_matches_cpu_on_hopper() {
         env.step(&actions).unwrap();
         finished += env.terminated().iter().filter(|&&t| t == 1).count();
         let input = StepInput::from_env(&env, &actions);
-        cpu.step(&input).unwrap();
-        gpu.step(&input).unwrap();
-        assert_eq!(
-            gpu.read_augmented().unwrap(),
-            cpu.augmented(),
-            "step {step}"
-        );
-        assert_eq!(
-            record_list(&gpu.read_records().unwrap()),
-            record_list(cpu.records()),
-            "step {step}"
-        );
+        step_both(&mut cpu, &mut gpu, &input, &format!("step {step}"));
     }
     assert!(
         finished > copies,

@@ -175,3 +175,29 @@ pub fn build_agent(
         Algo::AugmentedSac => Box::new(augmented_sac::augmented_sac(spec, hyper, devices, seed)),
     }
 }
+
+/// `n` random transitions at `spec`'s sizes (values uniform in [−1, 1), every fifth one
+/// terminal): what update benchmarks and tests feed the learners, whose cost does not depend on
+/// the values.
+pub fn random_batch(spec: &AgentSpec, n: usize, seed: u64) -> Transitions {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut random = |len: usize| {
+        (0..len)
+            .map(|_| rng.random_range(-1.0f32..1.0))
+            .collect::<Vec<f32>>()
+    };
+    let (aug, obs, act) = (spec.augmented_dim(), spec.obs_dim, spec.act_dim);
+    Transitions {
+        copy: vec![0; n],
+        episode: vec![0; n],
+        tau: vec![0; n],
+        augmented: random(n * aug),
+        state: random(n * obs),
+        action: random(n * act),
+        reward: random(n),
+        next_augmented: random(n * aug),
+        next_state: random(n * obs),
+        terminated: (0..n).map(|i| u32::from(i % 5 == 0)).collect(),
+    }
+}
