@@ -12,6 +12,11 @@ venv="$deps/venv"
 stamp="$deps/setup.stamp"
 requirements="mujoco==3.17.0 gymnasium[mujoco]==1.4.0"
 
+if ! command -v pkg-config >/dev/null 2>&1; then
+    echo "setup: pkg-config is missing; the build finds MuJoCo through it (Debian/Ubuntu: apt-get install pkgconf)" >&2
+    exit 1
+fi
+
 if [[ -f "$stamp" && "$(cat "$stamp")" == "$requirements" && -e "$deps/mujoco/lib/libmujoco.so" && -d "$deps/mujoco-assets" ]]; then
     exit 0
 fi
