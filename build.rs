@@ -5,10 +5,15 @@
 use std::path::PathBuf;
 
 fn main() {
-    let root = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let root = PathBuf::from(
+        std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"),
+    );
     let lib_dir = root.join(".deps/mujoco/lib");
     println!("cargo::rerun-if-changed=build.rs");
-    println!("cargo::rerun-if-changed={}", lib_dir.join("libmujoco.so").display());
+    println!(
+        "cargo::rerun-if-changed={}",
+        lib_dir.join("libmujoco.so").display()
+    );
     if !lib_dir.join("libmujoco.so").is_file() {
         panic!(
             "\n\nMuJoCo 3.17.0 is not set up ({} has no libmujoco.so).\nRun `scripts/setup.sh` once (it fetches the mujoco and gymnasium wheels into .deps/), then build again.\n\n",
