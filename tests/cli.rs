@@ -21,10 +21,15 @@ fn write(dir: &Path, name: &str, text: &str) -> String {
 
 /// Runs `dhrl rollout` on inverted-pendulum (nq = nv = 2, one action dimension).
 fn rollout(state: &str, actions: &str) -> Output {
+    rollout_with(state, actions, &[])
+}
+
+/// [`rollout`] with `extra` options.
+fn rollout_with(state: &str, actions: &str, extra: &[&str]) -> Output {
     let dir = tempfile::tempdir().unwrap();
     let state = write(dir.path(), "state.json", state);
     let actions = write(dir.path(), "actions.csv", actions);
-    dhrl(&[
+    let mut args = vec![
         "rollout",
         "--task",
         "inverted-pendulum",
@@ -32,7 +37,9 @@ fn rollout(state: &str, actions: &str) -> Output {
         &state,
         "--actions",
         &actions,
-    ])
+    ];
+    args.extend_from_slice(extra);
+    dhrl(&args)
 }
 
 fn assert_error(out: &Output, needle: &str) {
@@ -262,22 +269,7 @@ fn delayed_rollout_passes_the_outside_check() {
 #[test]
 fn bad_delay_options_are_clear_errors() {
     let state = r#"{"qpos": [0.0, 0.0], "qvel": [0.0, 0.0]}"#;
-    let dir = tempfile::tempdir().unwrap();
-    let state = write(dir.path(), "state.json", state);
-    let actions = write(dir.path(), "actions.csv", "0\n");
-    let run = |extra: &[&str]| {
-        let mut args = vec![
-            "rollout",
-            "--task",
-            "inverted-pendulum",
-            "--init-state",
-            &state,
-            "--actions",
-            &actions,
-        ];
-        args.extend_from_slice(extra);
-        dhrl(&args)
-    };
+    let run = |extra: &[&str]| rollout_with(state, "0\n", extra);
     assert_error(
         &run(&["--delay", "-2"]),
         "--delay must be a whole number of steps ≥ 0, got -2",

@@ -22,18 +22,24 @@ pub struct Bpql {
     learner: SacLearner,
 }
 
+/// BPQL's learner: a [`SacLearner`] with the actor on `x` and the critics on `s`. D2HPG's
+/// regular learner is the same.
+pub fn bpql_learner(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u64) -> SacLearner {
+    SacLearner::new(
+        spec.augmented_dim(),
+        spec.obs_dim,
+        spec,
+        hyper,
+        devices,
+        seed,
+    )
+}
+
 impl Bpql {
     pub fn new(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u64) -> Bpql {
         Bpql {
             spec: spec.clone(),
-            learner: SacLearner::new(
-                spec.augmented_dim(),
-                spec.obs_dim,
-                spec,
-                hyper,
-                devices,
-                seed,
-            ),
+            learner: bpql_learner(spec, hyper, devices, seed),
         }
     }
 }

@@ -19,6 +19,7 @@ use std::path::Path;
 use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::bpql::bpql_learner;
 use super::sac::{SacBatch, SacLearner, transition_tensors};
 use super::{ActMode, Agent, AgentSpec, Hyper};
 use crate::delay::Transitions;
@@ -84,14 +85,7 @@ impl D2hpg {
             spec: spec.clone(),
             regular_kind,
             lifting,
-            regular: SacLearner::new(
-                spec.augmented_dim(),
-                spec.obs_dim,
-                spec,
-                hyper,
-                devices,
-                seed,
-            ),
+            regular: bpql_learner(spec, hyper, devices, seed),
             delay_free: SacLearner::new(
                 spec.obs_dim,
                 spec.obs_dim,
