@@ -8,9 +8,13 @@ sizes. PyTorch is not part of dhrl's set-up: install it into the venv first,
 `.deps/venv/bin/pip install torch`.
 
     .deps/venv/bin/python scripts/bench_torch_sac.py [--obs 17 --act 6 --task half-cheetah --threads 2]
+
+On a GPU machine, `--torch-device cuda --dhrl-device wgpu` sets PyTorch's CUDA update beside
+dhrl's burn-wgpu one (dhrl built with `--features wgpu-learner`).
 """
 import argparse
 import json
+import os
 import subprocess
 import time
 
@@ -53,9 +57,13 @@ def main():
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--updates", type=int, default=300)
     parser.add_argument("--dhrl", default="target/release/dhrl")
+    parser.add_argument("--torch-device", default="cpu", help="cpu or cuda")
+    parser.add_argument("--dhrl-device", default="cpu", help="cpu or wgpu")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
+    dev = torch.device(args.torch_device)
+    torch.set_default_device(dev)
     actor, q1, q2 = Actor(args.obs, args.act), QNet(args.obs, args.act), QNet(args.obs, args.act)
     t1, t2 = QNet(args.obs, args.act), QNet(args.obs, args.act)
     t1.load_state_dict(q1.state_dict())
@@ -91,16 +99,24 @@ def main():
                 for p_t, p in zip(target.parameters(), online.parameters()):
                     p_t.mul_(0.995).add_(0.005 * p)
 
+    def sync():
+        if dev.type == "cuda":
+            torch.cuda.synchronize()
+
     for _ in range(20):
         update()
+    sync()
     start = time.perf_counter()
     for _ in range(args.updates):
         update()
+    sync()
     torch_rate = args.updates / (time.perf_counter() - start)
     dhrl = json.loads(subprocess.run(
-        [args.dhrl, "bench", "update", "--algo", "sac", "--task", args.task, "--batch-size", str(b), "--updates", str(args.updates), "--json"],
-        check=True, capture_output=True, text=True, env={"RAYON_NUM_THREADS": str(args.threads)}).stdout)
+        [args.dhrl, "bench", "update", "--algo", "sac", "--task", args.task, "--batch-size", str(b), "--updates", str(args.updates),
+         "--device", args.dhrl_device, "--json"],
+        check=True, capture_output=True, text=True, env={**os.environ, "RAYON_NUM_THREADS": str(args.threads)}).stdout)
     print(json.dumps({"task": args.task, "batch": b, "threads": args.threads, "torch": torch.__version__,
+                      "torch_device": args.torch_device, "dhrl_device": args.dhrl_device,
                       "torch_updates_per_sec": round(torch_rate, 1), "dhrl_updates_per_sec": round(dhrl["updates_per_sec"], 1),
                       "ratio": round(dhrl["updates_per_sec"] / torch_rate, 3)}))
 

@@ -23,7 +23,7 @@ use super::bpql::bpql_learner;
 use super::sac::{SacBatch, SacLearner, transition_tensors};
 use super::{ActMode, Agent, AgentSpec, Hyper};
 use crate::delay::Transitions;
-use crate::learn::{Devices, GaussianPolicy, LearnError, Noise, lifting_loss};
+use crate::learn::{Devices, LearnError, Noise, lifting_loss, squashed_samples_k};
 
 /// How strongly, and from how many samples, the regular policy is lifted.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -133,15 +133,16 @@ impl Agent for D2hpg {
             &self.delay_free.scale,
         );
 
-        // 3. The regular policy, pulled toward it by λ·L_lift (Eq. 5).
+        // 3. The regular policy, pulled toward it by λ·L_lift (Eq. 5), from its distribution
+        //    at x (the BPQL actor term shares that trunk pass).
         let regular_eps = self.lifting_noise.normal3(rows, k, act, &plain);
-        let (weight, x, scale) = (
-            self.lifting.weight,
-            regular_batch.actor_input.clone(),
-            self.regular.scale.clone(),
-        );
-        let lift = move |actor: &GaussianPolicy| {
-            lifting_loss(actor.sample_k(x, regular_eps, &scale), free_actions).mul_scalar(weight)
+        let (weight, scale) = (self.lifting.weight, self.regular.scale.clone());
+        let lift = move |distribution| {
+            lifting_loss(
+                squashed_samples_k(distribution, regular_eps, &scale),
+                free_actions,
+            )
+            .mul_scalar(weight)
         };
         let mut stats = vec![
             ("free_critic_loss", free.critic_loss),
@@ -154,7 +155,7 @@ impl Agent for D2hpg {
                 let critic_loss = self.regular.update_critics(&regular_batch);
                 let (actor_loss, lifting, mean_log_prob) = self
                     .regular
-                    .update_actor(&regular_batch, |actor| Some(lift(actor)));
+                    .update_actor(&regular_batch, |distribution| Some(lift(distribution)));
                 self.regular.update_temperature(mean_log_prob);
                 self.regular.update_targets();
                 stats.extend([
@@ -165,7 +166,10 @@ impl Agent for D2hpg {
                 ]);
             }
             Regular::LiftingOnly => {
-                let lifting = self.regular.update_actor_with(lift);
+                let x = regular_batch.actor_input;
+                let lifting = self
+                    .regular
+                    .update_actor_with(|actor| lift(actor.distribution(x)));
                 stats.push(("lifting_loss", lifting));
             }
         }

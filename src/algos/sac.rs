@@ -15,7 +15,7 @@ use super::{ActMode, Agent, AgentSpec, Hyper};
 use crate::delay::Transitions;
 use crate::learn::{
     ActionScale, Devices, GaussianPolicy, LearnError, Noise, Temperature, TwinQ, actor_loss,
-    column, critic_loss, critic_target, matrix, polyak, temperature_loss, to_vec,
+    column, critic_loss, critic_target, matrix, polyak, squashed_sample, temperature_loss, to_vec,
 };
 
 /// Losses and temperature of one update.
@@ -202,19 +202,19 @@ impl SacLearner {
     }
 
     /// Actor (Eq. 7): `α log π(a|x) − min Q(s, a)`, `a ~ π(·|x)`, critics held fixed, plus
-    /// `extra(actor)` (a loss on the same actor, e.g. D2HPG's lifting term) in the same step.
-    /// Returns the SAC loss, the extra loss and the batch mean of `log π`.
+    /// `extra((μ, log σ))` (a loss on the same actor's distribution at `x`, e.g. D2HPG's
+    /// lifting term, sharing its trunk pass) in the same step. Returns the SAC loss, the extra
+    /// loss and the batch mean of `log π`.
     pub fn update_actor(
         &mut self,
         batch: &SacBatch,
-        extra: impl FnOnce(&GaussianPolicy) -> Option<Tensor<1>>,
+        extra: impl FnOnce((Tensor<2>, Tensor<2>)) -> Option<Tensor<1>>,
     ) -> (f64, f64, f64) {
         let rows = batch.reward.dims()[0];
         let alpha = self.temperature.alpha();
         let eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
-        let pi = self
-            .actor
-            .sample(batch.actor_input.clone(), eps, &self.scale);
+        let distribution = self.actor.distribution(batch.actor_input.clone());
+        let pi = squashed_sample(distribution.clone(), eps, &self.scale);
         let mean_log_prob = f64::from(pi.log_prob.clone().inner().mean().into_scalar::<f32>());
         let q = self
             .critic
@@ -222,7 +222,7 @@ impl SacLearner {
             .min(batch.critic_input.clone(), pi.action);
         let loss = actor_loss(pi.log_prob, q, alpha);
         let value = f64::from(loss.clone().inner().into_scalar::<f32>());
-        let (loss, extra_value) = match extra(&self.actor) {
+        let (loss, extra_value) = match extra(distribution) {
             Some(extra) => {
                 let extra_value = f64::from(extra.clone().inner().into_scalar::<f32>());
                 (loss + extra, extra_value)

@@ -8,14 +8,14 @@ mod nets;
 mod noise;
 mod tensors;
 
-pub use device::{Devices, LearnDevice};
+pub use device::{Devices, LearnDevice, real_gpu_adapters};
 pub use losses::{
     actor_loss, critic_loss, critic_target, lifting_loss, polyak, squashed_gaussian_log_prob,
     temperature_loss,
 };
 pub use nets::{
     ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, PolicySample, QNetwork,
-    Temperature, TwinQ,
+    Temperature, TwinQ, squashed_sample, squashed_samples_k,
 };
 pub use noise::Noise;
 pub use tensors::{column, matrix, to_vec};
@@ -27,6 +27,11 @@ pub enum LearnError {
         "--device wgpu needs the `wgpu-learner` cargo feature: build with `cargo build --release --features wgpu-learner`"
     )]
     WgpuNotBuilt,
+    #[error(
+        "--device wgpu needs a real GPU adapter, and wgpu found none (adapters seen: {found}); \
+         burn's generated kernels crash software rasterisers such as Mesa's lavapipe: use --device cpu"
+    )]
+    NoRealGpu { found: String },
     #[error("cannot save {what}: {message}")]
     Save { what: String, message: String },
     #[error("cannot load {what}: {message}")]

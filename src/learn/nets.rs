@@ -149,23 +149,13 @@ impl GaussianPolicy {
 
     /// `a = scale·tanh(μ + σ·ε) + bias` with its log-density, reparameterised through `ε`.
     pub fn sample(&self, input: Tensor<2>, eps: Tensor<2>, scale: &ActionScale) -> PolicySample {
-        let (mean, log_std) = self.distribution(input);
-        let u = mean + log_std.clone().exp() * eps.clone();
-        let log_prob = squashed_gaussian_log_prob(u.clone(), eps, log_std, scale.log_scale_sum);
-        PolicySample {
-            action: u.tanh() * scale.scale.clone() + scale.bias.clone(),
-            log_prob,
-        }
+        squashed_sample(self.distribution(input), eps, scale)
     }
 
     /// `K` squashed actions per row, `[B, K, A]`, from `eps` `[B, K, A]`: the trunk runs once
     /// per state, only the sampling is repeated.
     pub fn sample_k(&self, input: Tensor<2>, eps: Tensor<3>, scale: &ActionScale) -> Tensor<3> {
-        let (mean, log_std) = self.distribution(input);
-        let (mean, std): (Tensor<3>, Tensor<3>) =
-            (mean.unsqueeze_dim(1), log_std.exp().unsqueeze_dim(1));
-        let u = mean + std * eps;
-        u.tanh() * scale.scale.clone().unsqueeze_dim(1) + scale.bias.clone().unsqueeze_dim(1)
+        squashed_samples_k(self.distribution(input), eps, scale)
     }
 
     /// The deterministic action `scale·tanh(μ) + bias` (evaluation).
@@ -173,6 +163,33 @@ impl GaussianPolicy {
         let (mean, _) = self.distribution(input);
         mean.tanh() * scale.scale.clone() + scale.bias.clone()
     }
+}
+
+/// [`GaussianPolicy::sample`] from a distribution already computed (so that two losses on
+/// the same states share one trunk pass).
+pub fn squashed_sample(
+    (mean, log_std): (Tensor<2>, Tensor<2>),
+    eps: Tensor<2>,
+    scale: &ActionScale,
+) -> PolicySample {
+    let u = mean + log_std.clone().exp() * eps.clone();
+    let log_prob = squashed_gaussian_log_prob(u.clone(), eps, log_std, scale.log_scale_sum);
+    PolicySample {
+        action: u.tanh() * scale.scale.clone() + scale.bias.clone(),
+        log_prob,
+    }
+}
+
+/// [`GaussianPolicy::sample_k`] from a distribution already computed.
+pub fn squashed_samples_k(
+    (mean, log_std): (Tensor<2>, Tensor<2>),
+    eps: Tensor<3>,
+    scale: &ActionScale,
+) -> Tensor<3> {
+    let (mean, std): (Tensor<3>, Tensor<3>) =
+        (mean.unsqueeze_dim(1), log_std.exp().unsqueeze_dim(1));
+    let u = mean + std * eps;
+    u.tanh() * scale.scale.clone().unsqueeze_dim(1) + scale.bias.clone().unsqueeze_dim(1)
 }
 
 /// The entropy temperature `α = exp(log α)`.

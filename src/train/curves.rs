@@ -1,6 +1,6 @@
 //! Learning curves of finished runs: `dhrl plot` reads each run's `config.toml` and
-//! `evals.csv`, groups the runs by (task, algorithm, delay), averages the seeds, draws the
-//! curves as SVG with plotters, and summarises the final evaluations.
+//! `evals.csv`, groups the runs by (task, algorithm, delay; D2HPG's λ and K too), averages the
+//! seeds, draws the curves as SVG with plotters, and summarises the final evaluations.
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -8,8 +8,9 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 use super::{TrainConfig, TrainError, io_error};
+use crate::algos::{Algo, Lifting};
 
-/// One group of runs (the same task, algorithm and delay; several seeds).
+/// One group of runs (the same task, algorithm, delay and lifting settings; several seeds).
 #[derive(Debug, Clone, Serialize)]
 pub struct CurveSummary {
     pub label: String,
@@ -60,7 +61,11 @@ pub fn summarize_runs(runs: &[PathBuf]) -> Result<Vec<CurveSummary>, TrainError>
     for run in runs {
         let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
         let delay = config.validate()?;
-        let label = format!("{} {} Δ={delay}", config.task, config.algo);
+        let mut label = format!("{} {} Δ={delay}", config.task, config.algo);
+        if matches!(config.algo, Algo::D2hpg | Algo::D2hpgNaive) {
+            let Lifting { weight, samples } = config.lifting;
+            label += &format!(" λ={weight} K={samples}");
+        }
         groups
             .entry(label)
             .or_default()
