@@ -1,6 +1,8 @@
 //! BPQL and D2HPG: the lifting loss by hand, its gradient reaching the regular policy only,
 //! D2HPG without lifting being exactly BPQL beside an independent delay-free SAC, and both
 //! learning a small delayed task.
+mod common;
+
 use std::process::Command;
 use std::sync::Mutex;
 
@@ -253,9 +255,8 @@ fn bpql_and_d2hpg_clearly_beat_a_random_policy_under_delay() {
     for algo in ["bpql", "d2hpg"] {
         let dir = tempfile::tempdir().unwrap();
         let run = dir.path().join("run");
-        let out = Command::new(env!("CARGO_BIN_EXE_dhrl"))
-            .args([
-                "train",
+        common::train(
+            &[
                 "--task",
                 "inverted-pendulum",
                 "--algo",
@@ -264,8 +265,6 @@ fn bpql_and_d2hpg_clearly_beat_a_random_policy_under_delay() {
                 "3",
                 "--steps",
                 "4000",
-            ])
-            .args([
                 "--warmup-steps",
                 "500",
                 "--eval-every",
@@ -276,22 +275,10 @@ fn bpql_and_d2hpg_clearly_beat_a_random_policy_under_delay() {
                 "128",
                 "--seed",
                 "2",
-            ])
-            .arg("--out")
-            .arg(&run)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+            ],
+            &run,
         );
-        let text = std::fs::read_to_string(run.join("evals.csv")).unwrap();
-        let best = text
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').nth(2).unwrap().parse::<f64>().unwrap())
-            .fold(f64::MIN, f64::max);
+        let (best, text) = common::best_return(&run);
         assert!(
             best > 4.0 * random,
             "{algo}: best evaluation return {best}, a random policy's {random:.1}\n{text}"

@@ -7,7 +7,7 @@
 //! GPU into a failure (set it on a GPU machine so that nothing skips silently).
 #![cfg(feature = "wgpu-learner")]
 
-use std::process::Command;
+mod common;
 
 use dhrl::algos::{ActMode, AgentSpec, Algo, Hyper, Lifting, build_agent, random_batch};
 use dhrl::learn::{Devices, LearnDevice, real_gpu_adapters};
@@ -113,31 +113,26 @@ fn sac_learns_inverted_pendulum_on_wgpu() {
     }
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let out = Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(["train", "--task", "inverted-pendulum", "--device", "wgpu"])
-        .args([
+    common::train(
+        &[
+            "--task",
+            "inverted-pendulum",
+            "--device",
+            "wgpu",
             "--steps",
             "3000",
             "--warmup-steps",
             "500",
             "--eval-every",
             "1000",
-        ])
-        .args(["--eval-episodes", "5", "--seed", "1", "--out"])
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+            "--eval-episodes",
+            "5",
+            "--seed",
+            "1",
+        ],
+        &run,
     );
-    let text = std::fs::read_to_string(run.join("evals.csv")).unwrap();
-    let best = text
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').nth(2).unwrap().parse::<f64>().unwrap())
-        .fold(f64::MIN, f64::max);
+    let (best, text) = common::best_return(&run);
     assert!(
         best > 50.0,
         "SAC on wgpu: best evaluation return {best}, a random policy's ~10\n{text}"
