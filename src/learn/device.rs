@@ -52,6 +52,7 @@ impl Devices {
 
 /// The adapters wgpu sees, as `(real GPUs, all)`, each "name (type, backend)". A real GPU is
 /// any adapter that is not a CPU rasteriser; burn's wgpu learner needs one.
+#[cfg(feature = "wgpu-learner")]
 pub fn real_gpu_adapters() -> (Vec<String>, Vec<String>) {
     let instance =
         wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());

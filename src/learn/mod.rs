@@ -8,7 +8,9 @@ mod nets;
 mod noise;
 mod tensors;
 
-pub use device::{Devices, LearnDevice, real_gpu_adapters};
+#[cfg(feature = "wgpu-learner")]
+pub use device::real_gpu_adapters;
+pub use device::{Devices, LearnDevice};
 pub use losses::{
     actor_loss, critic_loss, critic_target, lifting_loss, polyak, squashed_gaussian_log_prob,
     temperature_loss,
