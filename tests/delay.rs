@@ -214,6 +214,11 @@ fn key_transitions(tr: &Transitions, layout_aug: usize, obs: usize, act: usize, 
     }
 }
 
+/// Room for every record of [`run_cpu`]: at most one step and one final state per copy and step.
+fn replay_capacity(copies: usize, steps: usize, delay: usize) -> usize {
+    copies * (2 * steps + 2 * delay + 8)
+}
+
 /// Runs the CPU layer over a fake batch, checking `x_t` every step; returns the emitted
 /// transitions keyed by (copy, episode, τ), the undelayed log and the replay store.
 fn run_cpu(
@@ -227,8 +232,7 @@ fn run_cpu(
     let mut fake = FakeBatch::new(copies, obs_dim, act_dim, max_len, seed);
     let mut layer = cpu_layer(delay, copies, obs_dim);
     let layout = layer.layout();
-    // Room for every record: at most one step and one final state per copy and step.
-    let mut replay = ReplayStore::new(layout, copies * (2 * steps + 2 * delay + 8)).unwrap();
+    let mut replay = ReplayStore::new(layout, replay_capacity(copies, steps, delay)).unwrap();
     layer.reset(&fake.initial()).unwrap();
     let mut log = fake.new_log();
     let mut emitted = Keyed::new();
@@ -635,13 +639,9 @@ fn replay_store_survives_save_and_load() {
     let (_, _, replay, _) = run_cpu(3, 3, 12, 40, 5);
     let mut bytes = Vec::new();
     replay.save(&mut bytes).unwrap();
-    let layout = cpu_layer(3, 3, 3).layout();
-    let layout = dhrl::delay::DelayLayout {
-        act_dim: 2,
-        ..layout
-    };
-    // The same capacity as run_cpu's store.
-    let mut restored = ReplayStore::new(layout, 3 * (2 * 40 + 2 * 3 + 8)).unwrap();
+    // The layout and capacity of run_cpu's store.
+    let mut restored =
+        ReplayStore::new(cpu_layer(3, 3, 3).layout(), replay_capacity(3, 40, 3)).unwrap();
     restored.load(&mut bytes.as_slice()).unwrap();
     assert_eq!(restored.len(), replay.len());
     assert!(

@@ -1,5 +1,7 @@
 //! `dhrl train` end to end: it learns, it refuses to overwrite, and a killed run resumes to
 //! exactly the run that was never interrupted.
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -18,20 +20,6 @@ fn ok(out: Output) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8(out.stdout).unwrap()
-}
-
-/// Column `name` of a CSV file.
-fn column(path: &Path, name: &str) -> Vec<String> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let k = header
-        .iter()
-        .position(|h| *h == name)
-        .unwrap_or_else(|| panic!("no column {name} in {header:?}"));
-    lines
-        .map(|l| l.split(',').nth(k).unwrap().to_string())
-        .collect()
 }
 
 const SMALL: [&str; 14] = [
@@ -74,7 +62,7 @@ fn sac_clearly_beats_a_random_policy_on_inverted_pendulum() {
         "--out",
         run.to_str().unwrap(),
     ]));
-    let returns: Vec<f64> = column(&run.join("evals.csv"), "return_mean")
+    let returns: Vec<f64> = common::column(&run.join("evals.csv"), "return_mean")
         .iter()
         .map(|v| v.parse().unwrap())
         .collect();
@@ -172,13 +160,13 @@ fn killed_run_resumes_to_the_uninterrupted_run() {
     ] {
         for name in columns {
             assert_eq!(
-                column(&killed.join(file), name),
-                column(&whole.join(file), name),
+                common::column(&killed.join(file), name),
+                common::column(&whole.join(file), name),
                 "{file} column {name}"
             );
         }
     }
-    assert!(column(&whole.join("evals.csv"), "step").len() >= 4);
+    assert!(common::column(&whole.join("evals.csv"), "step").len() >= 4);
 }
 
 #[test]

@@ -20,13 +20,26 @@ pub fn train(args: &[&str], run: &Path) {
     );
 }
 
+/// Column `name` of a CSV file.
+pub fn column(path: &Path, name: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let k = header
+        .iter()
+        .position(|h| *h == name)
+        .unwrap_or_else(|| panic!("no column {name} in {header:?}"));
+    lines
+        .map(|l| l.split(',').nth(k).unwrap().to_string())
+        .collect()
+}
+
 /// The best evaluation `return_mean` of a run, and its `evals.csv` for messages.
 pub fn best_return(run: &Path) -> (f64, String) {
-    let text = std::fs::read_to_string(run.join("evals.csv")).unwrap();
-    let best = text
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').nth(2).unwrap().parse::<f64>().unwrap())
+    let evals = run.join("evals.csv");
+    let best = column(&evals, "return_mean")
+        .iter()
+        .map(|v| v.parse::<f64>().unwrap())
         .fold(f64::MIN, f64::max);
-    (best, text)
+    (best, std::fs::read_to_string(evals).unwrap())
 }
