@@ -7,8 +7,8 @@
 //!
 //! One update, top to bottom:
 //! 1. the delay-free (abstract) SAC learner takes a SAC step on `(s, a, r, s')`;
-//! 2. the delay-free policy's squashed actions at `s` — K samples per state — are drawn and
-//!    held fixed;
+//! 2. the delay-free policy's squashed actions at `s` — K samples per state, from its
+//!    distribution as it was before step 1 (computed there anyway) — are drawn and held fixed;
 //! 3. `d2hpg`: the regular learner takes a BPQL step (beta critic on `s`, actor on `x`, see
 //!    `bpql.rs`) whose actor loss also carries `λ·L_lift`;
 //!    `d2hpg-naive`: the regular policy is updated by `λ·L_lift` alone.
@@ -16,7 +16,6 @@
 //! The regular policy is the one that acts; the delay-free one can be evaluated undelayed.
 use std::path::Path;
 
-use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::bpql::bpql_learner;
@@ -117,32 +116,35 @@ impl Agent for D2hpg {
         let regular_batch = transition_tensors(batch, &plain);
         let (rows, k, act) = (batch.len(), self.lifting.samples, self.spec.act_dim);
 
-        // 1. The delay-free (abstract) SAC on the time-aligned (s, a, r, s').
+        // 1. The delay-free (abstract) SAC on the time-aligned (s, a, r, s'); its actor's
+        //    distribution at s, as it was before this step, is kept off the graph.
         let free_batch = SacBatch {
             actor_input: regular_batch.critic_input.clone(),
             next_actor_input: regular_batch.next_critic_input.clone(),
             ..regular_batch.clone()
         };
-        let free = self.delay_free.update(&free_batch);
+        let mut free_distribution = None;
+        let free = self.delay_free.update_with(&free_batch, |(mean, log_std)| {
+            free_distribution = Some((mean.inner(), log_std.inner()));
+            None
+        });
+        let free_distribution = free_distribution.expect("the actor step hands its distribution");
 
-        // 2. Its squashed actions at s, K per state, held fixed for this update.
-        let free_eps = self.lifting_noise.normal3(rows, k, act, &plain);
-        let free_actions = self.delay_free.actor.valid().sample_k(
-            free_batch.actor_input.clone(),
-            free_eps,
-            &self.delay_free.scale,
-        );
+        // 2. Its squashed actions at s, K per state, held fixed for this update. The regular
+        //    policy's K samples below reuse the same ε (common random numbers): the two sets
+        //    of moments are then equal exactly when the two distributions are.
+        let eps = self.lifting_noise.normal3(k, rows, act, &plain);
+        let free_actions =
+            squashed_samples_k(free_distribution, eps.clone(), &self.delay_free.scale);
 
         // 3. The regular policy, pulled toward it by λ·L_lift (Eq. 5), from its distribution
-        //    at x (the BPQL actor term shares that trunk pass).
-        let regular_eps = self.lifting_noise.normal3(rows, k, act, &plain);
+        //    at x (the BPQL actor term shares that trunk pass). train.csv logs L_lift itself.
         let (weight, scale) = (self.lifting.weight, self.regular.scale.clone());
-        let lift = move |distribution| {
-            lifting_loss(
-                squashed_samples_k(distribution, regular_eps, &scale),
-                free_actions,
-            )
-            .mul_scalar(weight)
+        let mut lifting = 0.0;
+        let lift = |distribution| {
+            let loss = lifting_loss(squashed_samples_k(distribution, eps, &scale), free_actions);
+            lifting = f64::from(loss.clone().inner().into_scalar::<f32>());
+            loss.mul_scalar(weight)
         };
         let mut stats = vec![
             ("free_critic_loss", free.critic_loss),
@@ -151,28 +153,22 @@ impl Agent for D2hpg {
         ];
         match self.regular_kind {
             Regular::Bpql => {
-                let alpha = self.regular.temperature.alpha();
-                let critic_loss = self.regular.update_critics(&regular_batch);
-                let (actor_loss, lifting, mean_log_prob) = self
+                let regular = self
                     .regular
-                    .update_actor(&regular_batch, |distribution| Some(lift(distribution)));
-                self.regular.update_temperature(mean_log_prob);
-                self.regular.update_targets();
+                    .update_with(&regular_batch, |distribution| Some(lift(distribution)));
                 stats.extend([
-                    ("critic_loss", critic_loss),
-                    ("actor_loss", actor_loss),
-                    ("alpha", alpha),
-                    ("lifting_loss", lifting),
+                    ("critic_loss", regular.critic_loss),
+                    ("actor_loss", regular.actor_loss),
+                    ("alpha", regular.alpha),
                 ]);
             }
             Regular::LiftingOnly => {
                 let x = regular_batch.actor_input;
-                let lifting = self
-                    .regular
+                self.regular
                     .update_actor_with(|actor| lift(actor.distribution(x)));
-                stats.push(("lifting_loss", lifting));
             }
         }
+        stats.push(("lifting_loss", lifting));
         stats
     }
 

@@ -165,7 +165,7 @@ impl SacLearner {
 
     /// Critics (Eq. 3, 5): `y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|x'))`, `a' ~ π(·|x')`.
     /// Returns the loss.
-    pub fn update_critics(&mut self, batch: &SacBatch) -> f64 {
+    fn update_critics(&mut self, batch: &SacBatch) -> f64 {
         let rows = batch.reward.dims()[0];
         let alpha = self.temperature.alpha();
         let next_eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
@@ -203,13 +203,13 @@ impl SacLearner {
 
     /// Actor (Eq. 7): `α log π(a|x) − min Q(s, a)`, `a ~ π(·|x)`, critics held fixed, plus
     /// `extra((μ, log σ))` (a loss on the same actor's distribution at `x`, e.g. D2HPG's
-    /// lifting term, sharing its trunk pass) in the same step. Returns the SAC loss, the extra
-    /// loss and the batch mean of `log π`.
-    pub fn update_actor(
+    /// lifting term, sharing its trunk pass) in the same step. Returns the SAC loss and the
+    /// batch mean of `log π`.
+    fn update_actor(
         &mut self,
         batch: &SacBatch,
         extra: impl FnOnce((Tensor<2>, Tensor<2>)) -> Option<Tensor<1>>,
-    ) -> (f64, f64, f64) {
+    ) -> (f64, f64) {
         let rows = batch.reward.dims()[0];
         let alpha = self.temperature.alpha();
         let eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
@@ -222,34 +222,29 @@ impl SacLearner {
             .min(batch.critic_input.clone(), pi.action);
         let loss = actor_loss(pi.log_prob, q, alpha);
         let value = f64::from(loss.clone().inner().into_scalar::<f32>());
-        let (loss, extra_value) = match extra(distribution) {
-            Some(extra) => {
-                let extra_value = f64::from(extra.clone().inner().into_scalar::<f32>());
-                (loss + extra, extra_value)
-            }
-            None => (loss, 0.0),
+        let loss = match extra(distribution) {
+            Some(extra) => loss + extra,
+            None => loss,
         };
         let grads = GradientsParams::from_grads(loss.backward(), &self.actor);
         self.actor = self
             .actor_opt
             .step(self.hyper.learning_rate, self.actor.clone(), grads);
-        (value, extra_value, mean_log_prob)
+        (value, mean_log_prob)
     }
 
     /// Actor updated by a loss of its own alone (D2HPG-naive's lifting-only regular policy).
-    pub fn update_actor_with(&mut self, loss: impl FnOnce(&GaussianPolicy) -> Tensor<1>) -> f64 {
+    pub fn update_actor_with(&mut self, loss: impl FnOnce(&GaussianPolicy) -> Tensor<1>) {
         let loss = loss(&self.actor);
-        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
         let grads = GradientsParams::from_grads(loss.backward(), &self.actor);
         self.actor = self
             .actor_opt
             .step(self.hyper.learning_rate, self.actor.clone(), grads);
-        value
     }
 
     /// Temperature (Eq. 18): `−α(log π + H̄)`, toward the target entropy; returns the loss
     /// (0 when α is fixed).
-    pub fn update_temperature(&mut self, mean_log_prob: f64) -> f64 {
+    fn update_temperature(&mut self, mean_log_prob: f64) -> f64 {
         if !self.hyper.autotune_alpha {
             return 0.0;
         }
@@ -267,15 +262,24 @@ impl SacLearner {
     }
 
     /// Targets: `θ̄ ← τθ + (1 − τ)θ̄`.
-    pub fn update_targets(&mut self) {
+    fn update_targets(&mut self) {
         self.target = polyak(self.target.clone(), &self.critic, self.hyper.tau);
     }
 
     /// One SAC update: critics, actor, temperature, targets.
     pub fn update(&mut self, batch: &SacBatch) -> SacStats {
+        self.update_with(batch, |_| None)
+    }
+
+    /// One SAC update whose actor step also takes `extra` (see [`SacLearner::update_actor`]).
+    pub fn update_with(
+        &mut self,
+        batch: &SacBatch,
+        extra: impl FnOnce((Tensor<2>, Tensor<2>)) -> Option<Tensor<1>>,
+    ) -> SacStats {
         let alpha = self.temperature.alpha();
         let critic_loss = self.update_critics(batch);
-        let (actor_loss, _, mean_log_prob) = self.update_actor(batch, |_| None);
+        let (actor_loss, mean_log_prob) = self.update_actor(batch, extra);
         let alpha_loss = self.update_temperature(mean_log_prob);
         self.update_targets();
         SacStats {

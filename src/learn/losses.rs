@@ -98,7 +98,7 @@ pub fn polyak<M: Module>(target: M, online: &M, tau: f64) -> M {
 /// The lifting loss (Eq. 5 of the DHRL paper): the squared distance between the per-dimension
 /// mean and standard deviation of the regular policy's squashed actions at `x` and those of
 /// the abstract (here: delay-free) policy at `s`, `‖E[a↑] − E[ā]‖² + ‖σ[a↑] − σ[ā]‖²`, averaged
-/// over the batch. Both sides are `[B, K, A]`: K samples per state, standard deviations with
+/// over the batch. Both sides are `[K, B, A]`: K samples per state, standard deviations with
 /// the N − 1 correction. `abstract_actions` is a constant (plain tensor): the gradient flows
 /// into the regular policy only.
 pub fn lifting_loss(regular_actions: Tensor<3>, abstract_actions: Tensor<3>) -> Tensor<1> {
@@ -109,14 +109,14 @@ pub fn lifting_loss(regular_actions: Tensor<3>, abstract_actions: Tensor<3>) -> 
         .mean()
 }
 
-/// Per-state mean and standard deviation (N − 1) over the K samples of `[B, K, A]` actions,
-/// each `[B, 1, A]`.
+/// Per-state mean and standard deviation (N − 1) over the K samples of `[K, B, A]` actions,
+/// each `[1, B, A]`.
 fn action_moments(actions: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
-    let k = actions.dims()[1];
-    let mean = actions.clone().mean_dim(1);
+    let k = actions.dims()[0];
+    let mean = actions.clone().mean_dim(0);
     let variance = (actions - mean.clone())
         .square()
-        .sum_dim(1)
+        .sum_dim(0)
         .div_scalar((k.max(2) - 1) as f64);
     // The small floor keeps the square root differentiable where all samples coincide.
     (mean, variance.add_scalar(1e-12).sqrt())

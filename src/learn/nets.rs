@@ -3,7 +3,7 @@
 use burn::module::Param;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
-use burn::tensor::activation::relu;
+use burn::tensor::activation::{relu, sigmoid};
 
 use super::losses::squashed_gaussian_log_prob;
 use super::tensors::matrix;
@@ -152,7 +152,7 @@ impl GaussianPolicy {
         squashed_sample(self.distribution(input), eps, scale)
     }
 
-    /// `K` squashed actions per row, `[B, K, A]`, from `eps` `[B, K, A]`: the trunk runs once
+    /// `K` squashed actions per row, `[K, B, A]`, from `eps` `[K, B, A]`: the trunk runs once
     /// per state, only the sampling is repeated.
     pub fn sample_k(&self, input: Tensor<2>, eps: Tensor<3>, scale: &ActionScale) -> Tensor<3> {
         squashed_samples_k(self.distribution(input), eps, scale)
@@ -180,16 +180,21 @@ pub fn squashed_sample(
     }
 }
 
-/// [`GaussianPolicy::sample_k`] from a distribution already computed.
+/// [`GaussianPolicy::sample_k`] from a distribution already computed. The K samples lead
+/// (`[K, B, A]`), so that broadcasting `μ`, `σ` over them and reducing over them walk
+/// contiguous `[B, A]` blocks.
 pub fn squashed_samples_k(
     (mean, log_std): (Tensor<2>, Tensor<2>),
     eps: Tensor<3>,
     scale: &ActionScale,
 ) -> Tensor<3> {
     let (mean, std): (Tensor<3>, Tensor<3>) =
-        (mean.unsqueeze_dim(1), log_std.exp().unsqueeze_dim(1));
+        (mean.unsqueeze_dim(0), log_std.exp().unsqueeze_dim(0));
     let u = mean + std * eps;
-    u.tanh() * scale.scale.clone().unsqueeze_dim(1) + scale.bias.clone().unsqueeze_dim(1)
+    // tanh(u) = 2·σ(2u) − 1, evaluated through the logistic: on B·K·A entries, Flex's tanh
+    // (libm's scalar tanhf, called again by its backward) costs about three logistics.
+    let squashed = sigmoid(u.mul_scalar(2.0)).mul_scalar(2.0).sub_scalar(1.0);
+    squashed * scale.scale.clone().unsqueeze_dim(0) + scale.bias.clone().unsqueeze_dim(0)
 }
 
 /// The entropy temperature `α = exp(log α)`.

@@ -20,13 +20,13 @@ impl Noise {
         }
     }
 
-    /// A `[rows, k, cols]` tensor of independent N(0, 1) draws.
-    pub fn normal3(&mut self, rows: usize, k: usize, cols: usize, device: &Device) -> Tensor<3> {
-        let values: Vec<f32> = (0..rows * k * cols)
+    /// A `[k, rows, cols]` tensor of independent N(0, 1) draws: `k` samples of `[rows, cols]`.
+    pub fn normal3(&mut self, k: usize, rows: usize, cols: usize, device: &Device) -> Tensor<3> {
+        let values: Vec<f32> = (0..k * rows * cols)
             .map(|_| StandardNormal.sample(&mut self.rng))
             .collect();
         Tensor::from_data(
-            burn::prelude::TensorData::new(values, [rows, k, cols]),
+            burn::prelude::TensorData::new(values, [k, rows, cols]),
             device,
         )
     }

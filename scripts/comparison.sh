@@ -1,0 +1,97 @@
+#!/usr/bin/env bash
+# The runs behind the README's D2HPG comparison and lifting-settings tables, and their plots.
+#
+#   scripts/comparison.sh SET [--jobs N] [--seeds "0 1 2"] [--runs DIR] [--dry-run]
+#
+# SET: ip-delay5    InvertedPendulum, Δ = 5, 100k steps: d2hpg, bpql, augmented-sac, naive-sac
+#      hc-delay10   HalfCheetah, Δ = 10, 200k steps: d2hpg, bpql, augmented-sac
+#      lifting-ip   d2hpg on InvertedPendulum, Δ = 10, 25k steps: λ ∈ {0.1, 1, 10} at K = 10, K ∈ {2, 5, 20} at λ = 1
+#      lifting-hc   the same settings on HalfCheetah, Δ = 10, 50k steps
+#
+# Every run learns on one thread (RAYON_NUM_THREADS=1), N runs at a time (default: the number of
+# cores). A run folder that already exists is continued with `dhrl train --resume`, so the script
+# can be stopped and started again; a finished run is left as it is. The plot goes to
+# DIR/SET.svg (DIR defaults to runs/), with the final-return table printed beside it.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+usage() { sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+[[ $# -ge 1 ]] || usage
+set_name=$1
+shift
+case $set_name in
+    ip-delay5 | hc-delay10 | lifting-ip | lifting-hc) ;;
+    *) echo "comparison.sh: unknown set '$set_name' (accepted: ip-delay5, hc-delay10, lifting-ip, lifting-hc)" >&2; exit 2 ;;
+esac
+jobs=$(nproc)
+seeds="0 1 2"
+runs=runs
+dry_run=false
+while [[ $# -gt 0 ]]; do
+    case $1 in
+        --jobs) jobs=$2; shift 2 ;;
+        --seeds) seeds=$2; shift 2 ;;
+        --runs) runs=$2; shift 2 ;;
+        --dry-run) dry_run=true; shift ;;
+        *) echo "comparison.sh: unknown option $1" >&2; usage ;;
+    esac
+done
+
+# One line per run: folder name, then the flags of `dhrl train`.
+plan() {
+    local seed algo setting
+    for seed in $seeds; do
+        case $set_name in
+            ip-delay5)
+                for algo in d2hpg bpql augmented-sac naive-sac; do
+                    echo "ip-$algo-d5-s$seed --task inverted-pendulum --algo $algo --delay 5 --warmup zeros --steps 100000 --seed $seed"
+                done ;;
+            hc-delay10)
+                for algo in d2hpg bpql augmented-sac; do
+                    echo "hc-$algo-d10-s$seed --task half-cheetah --algo $algo --delay 10 --steps 200000 --seed $seed"
+                done ;;
+            lifting-ip | lifting-hc)
+                local task=inverted-pendulum prefix=ip extra="--warmup zeros --steps 25000"
+                if [[ $set_name == lifting-hc ]]; then task=half-cheetah prefix=hc extra="--steps 50000"; fi
+                for setting in "0.1 10" "1 10" "10 10" "1 2" "1 5" "1 20"; do
+                    set -- $setting
+                    echo "lift-$prefix-w$1-k$2-s$seed --task $task --algo d2hpg --delay 10 --lifting-weight $1 --lifting-samples $2 $extra --seed $seed"
+                done ;;
+        esac
+    done
+}
+
+lines=$(plan)
+dhrl=target/release/dhrl
+if ! $dry_run; then
+    scripts/setup.sh
+    cargo build --release --quiet
+    mkdir -p "$runs"
+fi
+
+run_one() {
+    local name=$1
+    shift
+    local dir="$runs/$name" steps
+    steps=$(printf '%s\n' "$@" | grep -A1 -x -- --steps | tail -n1)
+    if [[ -d $dir ]]; then
+        set -- --resume "$dir" --steps "$steps"
+    else
+        set -- --out "$dir" "$@"
+    fi
+    if $dry_run; then
+        echo "dhrl train $*"
+    else
+        echo "start $name" >&2
+        RAYON_NUM_THREADS=1 "$dhrl" train "$@" >"$runs/$name.log" 2>&1 || { echo "failed: $name (see $runs/$name.log)" >&2; return 1; }
+        echo "done  $name" >&2
+    fi
+}
+export -f run_one
+export runs dhrl dry_run
+
+printf '%s\n' "$lines" | xargs -P "$jobs" -L 1 bash -c 'run_one "$@"' _
+$dry_run && exit 0
+folders=$(printf '%s\n' "$lines" | awk -v runs="$runs" '{print runs "/" $1}')
+# shellcheck disable=SC2086
+"$dhrl" plot $folders --out "$runs/$set_name.svg" --title "$set_name"
