@@ -1,5 +1,6 @@
-//! `dhrl train` end to end: it learns, it refuses to overwrite, and a killed run resumes to
-//! exactly the run that was never interrupted.
+//! `dhrl train` end to end: it learns, every delayed algorithm runs on every task and delay
+//! option, it refuses to overwrite, and a killed run resumes to exactly the run that was never
+//! interrupted.
 mod common;
 
 use std::path::Path;
@@ -97,76 +98,137 @@ fn sac_clearly_beats_a_random_policy_on_inverted_pendulum() {
     );
 }
 
+/// The columns of a run's CSV file that a resumed run must reproduce: all but the timings.
+fn reproducible_columns(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let header = text.lines().next().unwrap();
+    header
+        .split(',')
+        .filter(|c| !["wall_seconds", "env_steps_per_sec", "updates_per_sec"].contains(c))
+        .map(String::from)
+        .collect()
+}
+
 #[test]
 fn killed_run_resumes_to_the_uninterrupted_run() {
-    let dir = tempfile::tempdir().unwrap();
-    let (whole, killed) = (dir.path().join("whole"), dir.path().join("killed"));
-    let with_out = |out: &Path| {
-        let mut args = vec![
-            "train",
-            "--steps",
-            "2000",
-            "--algo",
-            "augmented-sac",
-            "--delay",
-            "2",
-        ];
-        args.extend_from_slice(&SMALL);
-        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
-        args.into_iter().map(String::from).collect::<Vec<_>>()
-    };
-    ok(Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(with_out(&whole))
-        .output()
-        .unwrap());
+    // augmented-sac: one learner; d2hpg: two learners and the lifting noise in one checkpoint.
+    for algo in ["augmented-sac", "d2hpg"] {
+        let dir = tempfile::tempdir().unwrap();
+        let (whole, killed) = (dir.path().join("whole"), dir.path().join("killed"));
+        let with_out = |out: &Path| {
+            let mut args = vec!["train", "--steps", "2000", "--algo", algo, "--delay", "2"];
+            args.extend_from_slice(&SMALL);
+            args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+            args.into_iter().map(String::from).collect::<Vec<_>>()
+        };
+        ok(Command::new(env!("CARGO_BIN_EXE_dhrl"))
+            .args(with_out(&whole))
+            .output()
+            .unwrap());
 
-    // Start the same run, kill it once its first checkpoint is on disk, resume it.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(with_out(&killed))
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let start = Instant::now();
-    while !killed.join("checkpoint/state.json").exists() {
-        assert!(
-            start.elapsed() < Duration::from_secs(300),
-            "no checkpoint appeared"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(700));
-    child.kill().unwrap();
-    child.wait().unwrap();
-    let resumed = dhrl(&["train", "--resume", killed.to_str().unwrap()]);
-    ok(resumed);
-
-    for (file, columns) in [
-        (
-            "evals.csv",
-            &["step", "return_mean", "return_std", "length_mean"][..],
-        ),
-        (
-            "train.csv",
-            &[
-                "step",
-                "updates",
-                "critic_loss",
-                "actor_loss",
-                "alpha",
-                "alpha_loss",
-            ][..],
-        ),
-    ] {
-        for name in columns {
-            assert_eq!(
-                common::column(&killed.join(file), name),
-                common::column(&whole.join(file), name),
-                "{file} column {name}"
+        // Start the same run, kill it once its first checkpoint is on disk, resume it.
+        let mut child = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+            .args(with_out(&killed))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        while !killed.join("checkpoint/state.json").exists() {
+            assert!(
+                start.elapsed() < Duration::from_secs(300),
+                "no checkpoint appeared"
             );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(700));
+        child.kill().unwrap();
+        child.wait().unwrap();
+        let resumed = dhrl(&["train", "--resume", killed.to_str().unwrap()]);
+        ok(resumed);
+
+        for file in ["evals.csv", "train.csv"] {
+            let columns = reproducible_columns(&whole.join(file));
+            assert!(columns.len() >= 4, "{algo} {file}: {columns:?}");
+            for name in &columns {
+                assert_eq!(
+                    common::column(&killed.join(file), name),
+                    common::column(&whole.join(file), name),
+                    "{algo}: {file} column {name}"
+                );
+            }
+        }
+        assert!(common::column(&whole.join("evals.csv"), "step").len() >= 4);
+    }
+}
+
+/// Every delayed algorithm trains on every task, and each of them under every option of the
+/// delay layer (a few dozen updates per run: the pieces fit together, their losses stay
+/// finite and the evaluation runs; learning is the other tests' business).
+#[test]
+fn every_delayed_algorithm_trains_on_every_task_and_delay_option() {
+    let options: [&[&str]; 5] = [
+        &["--delay", "3"],
+        &["--delay", "1", "--action-delay", "2"],
+        &["--random-delay", "--max-delay", "3"],
+        &["--delay", "2", "--actuator-noise", "0.1"],
+        &["--delay", "2", "--warmup", "zeros"],
+    ];
+    let algos = ["naive-sac", "augmented-sac", "bpql", "d2hpg-naive", "d2hpg"];
+    let tasks = [
+        "ant",
+        "half-cheetah",
+        "hopper",
+        "walker2d",
+        "humanoid",
+        "inverted-pendulum",
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("log-often.toml");
+    std::fs::write(&config, "log_every = 10\n").unwrap();
+    for (i, algo) in algos.iter().enumerate() {
+        for (j, task) in tasks.iter().enumerate() {
+            // 6 tasks over 5 options: every algorithm meets every option.
+            let option = options[(i + j) % options.len()];
+            let run = dir.path().join(format!("{algo}-{task}"));
+            let mut args = vec![
+                "--task",
+                task,
+                "--algo",
+                algo,
+                "--steps",
+                "80",
+                "--warmup-steps",
+                "40",
+                "--batch-size",
+                "16",
+                "--eval-every",
+                "80",
+                "--eval-episodes",
+                "1",
+                "--config",
+                config.to_str().unwrap(),
+            ];
+            args.extend_from_slice(option);
+            common::train(&args, &run);
+            assert_eq!(common::column(&run.join("evals.csv"), "step"), ["80"]);
+            let train = run.join("train.csv");
+            assert_eq!(
+                common::column(&train, "updates"),
+                ["10", "20", "30", "40"],
+                "{algo} on {task}"
+            );
+            for name in reproducible_columns(&train) {
+                for value in common::column(&train, &name) {
+                    let value: f64 = value.parse().unwrap();
+                    assert!(
+                        value.is_finite(),
+                        "{algo} on {task} {option:?}: {name} = {value}"
+                    );
+                }
+            }
         }
     }
-    assert!(common::column(&whole.join("evals.csv"), "step").len() >= 4);
 }
 
 #[test]
