@@ -5,7 +5,8 @@
 #
 # SET: ip-delay5    InvertedPendulum, Δ = 5, 100k steps: d2hpg, bpql, augmented-sac, naive-sac
 #      hc-delay10   HalfCheetah, Δ = 10, 200k steps: d2hpg, bpql, augmented-sac
-#      lifting-ip   d2hpg on InvertedPendulum, Δ = 10, 25k steps: λ ∈ {0.1, 1, 10} at K = 10, K ∈ {2, 5, 20} at λ = 1
+#      lifting-ip   d2hpg on InvertedPendulum, Δ = 10, 25k steps: λ ∈ {0.1, 1, 10, 100} at K = 10,
+#                   K ∈ {2, 5, 20} at λ = 1, and λ = 10 with K = 2
 #      lifting-hc   the same settings on HalfCheetah, Δ = 10, 50k steps
 #
 # Every run learns on one thread (RAYON_NUM_THREADS=1), N runs at a time (default: the number of
@@ -53,7 +54,7 @@ plan() {
             lifting-ip | lifting-hc)
                 local task=inverted-pendulum prefix=ip extra="--warmup zeros --steps 25000"
                 if [[ $set_name == lifting-hc ]]; then task=half-cheetah prefix=hc extra="--steps 50000"; fi
-                for setting in "0.1 10" "1 10" "10 10" "1 2" "1 5" "1 20"; do
+                for setting in "0.1 10" "1 10" "10 10" "100 10" "1 2" "1 5" "1 20" "10 2"; do
                     set -- $setting
                     echo "lift-$prefix-w$1-k$2-s$seed --task $task --algo d2hpg --delay 10 --lifting-weight $1 --lifting-samples $2 $extra --seed $seed"
                 done ;;
