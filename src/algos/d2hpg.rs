@@ -6,12 +6,16 @@
 //! it by the lifting loss (Eq. 5).
 //!
 //! One update, top to bottom:
-//! 1. the delay-free (abstract) SAC learner takes a SAC step on `(s, a, r, s')`;
+//! 1. both critics step: the regular learner's beta critic on `s` (BPQL, see `bpql.rs`; not
+//!    in `d2hpg-naive`) and the delay-free (abstract) SAC critic on `(s, a, r, s')`;
 //! 2. the delay-free policy's squashed actions at `s` — K samples per state, from its
-//!    distribution as it was before step 1 (computed there anyway) — are drawn and held fixed;
-//! 3. `d2hpg`: the regular learner takes a BPQL step (beta critic on `s`, actor on `x`, see
-//!    `bpql.rs`) whose actor loss also carries `λ·L_lift`;
-//!    `d2hpg-naive`: the regular policy is updated by `λ·L_lift` alone.
+//!    distribution before this update — are drawn and held fixed;
+//! 3. `d2hpg`: the regular actor on `x` takes BPQL's actor step whose loss also carries
+//!    `λ·L_lift`; `d2hpg-naive`: the regular policy is updated by `λ·L_lift` alone; the
+//!    delay-free actor takes its SAC step; temperatures and targets follow.
+//!
+//! The two learners share no parameters, so steps 1 and 3 run them side by side on rayon's
+//! threads (one after the other on one thread, with the same numbers).
 //!
 //! The regular policy is the one that acts; the delay-free one can be evaluated undelayed.
 use std::path::Path;
@@ -61,6 +65,18 @@ pub fn delay_free_seed(seed: u64) -> u64 {
 }
 /// Seed offset of the lifting loss's samples.
 const LIFTING_SEED: u64 = 0x11F7;
+
+/// `(a(), b())`, on two of rayon's threads when it has them.
+fn side_by_side<A: Send, B: Send>(
+    a: impl FnOnce() -> A + Send,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    if rayon::current_num_threads() > 1 {
+        rayon::join(a, b)
+    } else {
+        (a(), b())
+    }
+}
 
 pub struct D2hpg {
     spec: AgentSpec,
@@ -116,61 +132,80 @@ impl Agent for D2hpg {
     fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {
         let plain = self.regular.devices.plain.clone();
         let regular_batch = transition_tensors(batch, &plain);
-        let (rows, k, act) = (batch.len(), self.lifting.samples, self.spec.act_dim);
-
-        // 1. The delay-free (abstract) SAC on the time-aligned (s, a, r, s'); its actor's
-        //    distribution at s, as it was before this step, is kept off the graph.
         let free_batch = SacBatch {
             actor_input: regular_batch.critic_input.clone(),
             next_actor_input: regular_batch.next_critic_input.clone(),
             ..regular_batch.clone()
         };
-        let mut free_distribution = None;
-        let free = self.delay_free.update_with(&free_batch, |(mean, log_std)| {
-            free_distribution = Some((mean.inner(), log_std.inner()));
-            None
-        });
-        let free_distribution = free_distribution.expect("the actor step hands its distribution");
+        let (rows, k, act) = (batch.len(), self.lifting.samples, self.spec.act_dim);
+        let with_bpql = self.regular_kind == Regular::Bpql;
+        let (regular, delay_free) = (&mut self.regular, &mut self.delay_free);
+        let (alpha, free_alpha) = (regular.temperature.alpha(), delay_free.temperature.alpha());
 
-        // 2. Its squashed actions at s, K per state, held fixed for this update. The regular
-        //    policy's K samples below reuse the same ε (common random numbers): the two sets
-        //    of moments are then equal exactly when the two distributions are.
+        // 1. The critics of both learners (the pseudo-code's joint critic step): the beta
+        //    critic on (s, a) for BPQL, the delay-free critic on the time-aligned (s, a, r, s');
+        //    and both policies' distributions, at x and at s, before either policy moves. The
+        //    learners share no parameters and draw from their own noise streams, so rayon runs
+        //    them side by side when it has two threads, with the same numbers as one after
+        //    the other.
+        let ((critic_loss, regular_distribution), (free_critic_loss, free_distribution)) =
+            side_by_side(
+                || {
+                    let loss = with_bpql.then(|| regular.update_critics(&regular_batch));
+                    (loss, regular.distribution(&regular_batch))
+                },
+                || {
+                    let loss = delay_free.update_critics(&free_batch);
+                    (loss, delay_free.distribution(&free_batch))
+                },
+            );
+
+        // 2. The delay-free policy's squashed actions at s, K per state, from its distribution
+        //    before this update, held fixed. The regular policy's K samples reuse the same ε
+        //    (common random numbers): the two sets of moments are then equal exactly when the
+        //    two distributions are. L_lift (Eq. 5) is logged unweighted.
         let eps = self.lifting_noise.normal3(k, rows, act, &plain);
-        let free_actions =
-            squashed_samples_k(free_distribution, eps.clone(), &self.delay_free.scale);
+        let (free_mean, free_log_std) = free_distribution.clone();
+        let free_actions = squashed_samples_k(
+            (free_mean.inner(), free_log_std.inner()),
+            eps.clone(),
+            &delay_free.scale,
+        );
+        let regular_actions = squashed_samples_k(regular_distribution.clone(), eps, &regular.scale);
+        let lifting = lifting_loss(regular_actions, free_actions);
+        let lifting_value = f64::from(lifting.clone().inner().into_scalar::<f32>());
+        let lift = lifting.mul_scalar(self.lifting.weight);
 
-        // 3. The regular policy, pulled toward it by λ·L_lift (Eq. 5), from its distribution
-        //    at x (the BPQL actor term shares that trunk pass). train.csv logs L_lift itself.
-        let (weight, scale) = (self.lifting.weight, self.regular.scale.clone());
-        let mut lifting = 0.0;
-        let lift = |distribution| {
-            let loss = lifting_loss(squashed_samples_k(distribution, eps, &scale), free_actions);
-            lifting = f64::from(loss.clone().inner().into_scalar::<f32>());
-            loss.mul_scalar(weight)
-        };
+        // 3. The policies, side by side again: `d2hpg` takes BPQL's actor step with λ·L_lift
+        //    in its loss, `d2hpg-naive` steps on λ·L_lift alone; the delay-free learner takes
+        //    its SAC actor step; then each its temperature and targets.
+        let (actor_loss, (free_actor_loss, _)) = side_by_side(
+            || {
+                if with_bpql {
+                    let (actor_loss, _) =
+                        regular.update_policy(&regular_batch, regular_distribution, Some(lift));
+                    Some(actor_loss)
+                } else {
+                    regular.update_actor_by(lift);
+                    None
+                }
+            },
+            || delay_free.update_policy(&free_batch, free_distribution, None),
+        );
+
         let mut stats = vec![
-            ("free_critic_loss", free.critic_loss),
-            ("free_actor_loss", free.actor_loss),
-            ("free_alpha", free.alpha),
+            ("free_critic_loss", free_critic_loss),
+            ("free_actor_loss", free_actor_loss),
+            ("free_alpha", free_alpha),
         ];
-        match self.regular_kind {
-            Regular::Bpql => {
-                let regular = self
-                    .regular
-                    .update_with(&regular_batch, |distribution| Some(lift(distribution)));
-                stats.extend([
-                    ("critic_loss", regular.critic_loss),
-                    ("actor_loss", regular.actor_loss),
-                    ("alpha", regular.alpha),
-                ]);
-            }
-            Regular::LiftingOnly => {
-                let x = regular_batch.actor_input;
-                self.regular
-                    .update_actor_with(|actor| lift(actor.distribution(x)));
-            }
+        if let (Some(critic_loss), Some(actor_loss)) = (critic_loss, actor_loss) {
+            stats.extend([
+                ("critic_loss", critic_loss),
+                ("actor_loss", actor_loss),
+                ("alpha", alpha),
+            ]);
         }
-        stats.push(("lifting_loss", lifting));
+        stats.push(("lifting_loss", lifting_value));
         stats
     }
 

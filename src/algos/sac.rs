@@ -164,8 +164,9 @@ impl SacLearner {
     }
 
     /// Critics (Eq. 3, 5): `y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|x'))`, `a' ~ π(·|x')`.
-    /// Returns the loss.
-    fn update_critics(&mut self, batch: &SacBatch) -> f64 {
+    /// Returns the loss. Leaves the actor as it is, so that [`SacLearner::distribution`] may
+    /// run before or after it.
+    pub fn update_critics(&mut self, batch: &SacBatch) -> f64 {
         let rows = batch.reward.dims()[0];
         let alpha = self.temperature.alpha();
         let next_eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
@@ -201,41 +202,44 @@ impl SacLearner {
         value
     }
 
-    /// Actor (Eq. 7): `α log π(a|x) − min Q(s, a)`, `a ~ π(·|x)`, critics held fixed, plus
-    /// `extra((μ, log σ))` (a loss on the same actor's distribution at `x`, e.g. D2HPG's
-    /// lifting term, sharing its trunk pass) in the same step. Returns the SAC loss and the
-    /// batch mean of `log π`.
-    fn update_actor(
+    /// The actor's `(μ, log σ)` at the batch's actor input, on the autodiff graph: what
+    /// [`SacLearner::update_policy`] steps from, and what other losses on the same policy
+    /// (D2HPG's lifting term) share.
+    pub fn distribution(&self, batch: &SacBatch) -> (Tensor<2>, Tensor<2>) {
+        self.actor.distribution(batch.actor_input.clone())
+    }
+
+    /// Actor (Eq. 7): `α log π(a|x) − min Q(s, a)`, `a ~ π(·|x)` from `distribution`, critics
+    /// held fixed, plus `extra` (a loss on the same distribution) in the same step; then the
+    /// temperature and the targets. Returns the actor's SAC loss and the temperature's loss.
+    pub fn update_policy(
         &mut self,
         batch: &SacBatch,
-        extra: impl FnOnce((Tensor<2>, Tensor<2>)) -> Option<Tensor<1>>,
+        distribution: (Tensor<2>, Tensor<2>),
+        extra: Option<Tensor<1>>,
     ) -> (f64, f64) {
         let rows = batch.reward.dims()[0];
         let alpha = self.temperature.alpha();
         let eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
-        let distribution = self.actor.distribution(batch.actor_input.clone());
-        let pi = squashed_sample(distribution.clone(), eps, &self.scale);
+        let pi = squashed_sample(distribution, eps, &self.scale);
         let mean_log_prob = f64::from(pi.log_prob.clone().inner().mean().into_scalar::<f32>());
         let q = self
             .critic
             .valid()
             .min(batch.critic_input.clone(), pi.action);
         let loss = actor_loss(pi.log_prob, q, alpha);
-        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
-        let loss = match extra(distribution) {
+        let actor_loss = f64::from(loss.clone().inner().into_scalar::<f32>());
+        self.update_actor_by(match extra {
             Some(extra) => loss + extra,
             None => loss,
-        };
-        let grads = GradientsParams::from_grads(loss.backward(), &self.actor);
-        self.actor = self
-            .actor_opt
-            .step(self.hyper.learning_rate, self.actor.clone(), grads);
-        (value, mean_log_prob)
+        });
+        let alpha_loss = self.update_temperature(mean_log_prob);
+        self.update_targets();
+        (actor_loss, alpha_loss)
     }
 
-    /// Actor updated by a loss of its own alone (D2HPG-naive's lifting-only regular policy).
-    pub fn update_actor_with(&mut self, loss: impl FnOnce(&GaussianPolicy) -> Tensor<1>) {
-        let loss = loss(&self.actor);
+    /// One Adam step of the actor on `loss`.
+    pub fn update_actor_by(&mut self, loss: Tensor<1>) {
         let grads = GradientsParams::from_grads(loss.backward(), &self.actor);
         self.actor = self
             .actor_opt
@@ -268,20 +272,10 @@ impl SacLearner {
 
     /// One SAC update: critics, actor, temperature, targets.
     pub fn update(&mut self, batch: &SacBatch) -> SacStats {
-        self.update_with(batch, |_| None)
-    }
-
-    /// One SAC update whose actor step also takes `extra` (see [`SacLearner::update_actor`]).
-    pub fn update_with(
-        &mut self,
-        batch: &SacBatch,
-        extra: impl FnOnce((Tensor<2>, Tensor<2>)) -> Option<Tensor<1>>,
-    ) -> SacStats {
         let alpha = self.temperature.alpha();
         let critic_loss = self.update_critics(batch);
-        let (actor_loss, mean_log_prob) = self.update_actor(batch, extra);
-        let alpha_loss = self.update_temperature(mean_log_prob);
-        self.update_targets();
+        let distribution = self.distribution(batch);
+        let (actor_loss, alpha_loss) = self.update_policy(batch, distribution, None);
         SacStats {
             critic_loss,
             actor_loss,
