@@ -66,18 +66,6 @@ pub fn delay_free_seed(seed: u64) -> u64 {
 /// Seed offset of the lifting loss's samples.
 const LIFTING_SEED: u64 = 0x11F7;
 
-/// `(a(), b())`, on two of rayon's threads when it has them.
-fn side_by_side<A: Send, B: Send>(
-    a: impl FnOnce() -> A + Send,
-    b: impl FnOnce() -> B + Send,
-) -> (A, B) {
-    if rayon::current_num_threads() > 1 {
-        rayon::join(a, b)
-    } else {
-        (a(), b())
-    }
-}
-
 pub struct D2hpg {
     spec: AgentSpec,
     regular_kind: Regular,
@@ -149,7 +137,7 @@ impl Agent for D2hpg {
         //    them side by side when it has two threads, with the same numbers as one after
         //    the other.
         let ((critic_loss, regular_distribution), (free_critic_loss, free_distribution)) =
-            side_by_side(
+            rayon::join(
                 || {
                     let loss = with_bpql.then(|| regular.update_critics(&regular_batch));
                     (loss, regular.distribution(&regular_batch))
@@ -179,7 +167,7 @@ impl Agent for D2hpg {
         // 3. The policies, side by side again: `d2hpg` takes BPQL's actor step with λ·L_lift
         //    in its loss, `d2hpg-naive` steps on λ·L_lift alone; the delay-free learner takes
         //    its SAC actor step; then each its temperature and targets.
-        let (actor_loss, (free_actor_loss, _)) = side_by_side(
+        let (actor_loss, (free_actor_loss, _)) = rayon::join(
             || {
                 if with_bpql {
                     let (actor_loss, _) =
