@@ -1,32 +1,26 @@
 //! One SAC gradient update (256-256, batch 256) at HalfCheetah sizes on the CPU, and BPQL /
-//! D2HPG at Δ = 10 beside it.
+//! D2HPG at Δ = 10 beside it, each on its learners' thread count as in training.
 use criterion::{Criterion, criterion_group, criterion_main};
-use dhrl::algos::{AgentSpec, Algo, Hyper, Lifting, build_agent, random_batch};
+use dhrl::algos::{AgentSpec, AlgoSettings, UpdateContext, random_batch};
 use dhrl::learn::{Devices, LearnDevice};
+use dhrl::tasks::TaskName;
+use dhrl::train::learner_pool;
 
 fn updates(c: &mut Criterion) {
     let mut group = c.benchmark_group("update/half-cheetah sizes, batch 256");
     group.sample_size(20);
     let devices = Devices::new(LearnDevice::Cpu).unwrap();
-    for (algo, delay) in [(Algo::Sac, 0), (Algo::Bpql, 10), (Algo::D2hpg, 10)] {
-        let spec = AgentSpec {
-            obs_dim: 17,
-            act_dim: 6,
-            delay,
-            action_low: vec![-1.0; 6],
-            action_high: vec![1.0; 6],
-        };
-        let mut agent = build_agent(
-            algo,
-            &spec,
-            &Hyper::default(),
-            &Lifting::default(),
-            &devices,
-            0,
-        );
+    for (name, delay) in [("sac", 0), ("bpql", 10), ("d2hpg", 10)] {
+        let algo = AlgoSettings::new(name).unwrap();
+        let spec = AgentSpec::for_task(TaskName::HalfCheetah, delay).unwrap();
+        let mut agent = algo.build(&spec, &devices, 0).unwrap();
+        let pool = learner_pool(algo.info().learner_threads).unwrap();
         let data = random_batch(&spec, 256, 0);
-        group.bench_function(format!("{algo} Δ={delay}"), |b| {
-            b.iter(|| agent.update(&data))
+        group.bench_function(format!("{name} Δ={delay}"), |b| {
+            b.iter(|| {
+                pool.install(|| agent.update(&mut UpdateContext::fixed(&data, 0, 0)))
+                    .unwrap()
+            })
         });
     }
     group.finish();

@@ -193,7 +193,7 @@ pub fn bench_delay(
         cpu.push(layer);
         // No adapter is not an error here: the GPU columns stay empty.
         if let Ok(mut layer) = GpuDelayLayer::new(&config, envs, obs_dim, &low, &high, seed) {
-            layer.reset(batch.observations())?;
+            layer.reset_device(batch.observations())?;
             gpu.push(layer);
         }
     }
@@ -214,7 +214,8 @@ pub fn bench_delay(
         }
         for (i, layer) in gpu.iter_mut().enumerate() {
             let start = Instant::now();
-            layer.step(&input)?;
+            // The kernel alone: the training path also reads the outputs back.
+            layer.step_device(&input)?;
             layer.wait()?;
             gpu_time[i] += start.elapsed().as_secs_f64();
         }
@@ -240,55 +241,57 @@ pub fn bench_delay(
 /// The figures `dhrl bench update` prints.
 #[derive(Debug, Clone, Serialize)]
 pub struct UpdateBenchReport {
-    pub algo: crate::algos::Algo,
+    pub algo: &'static str,
     pub task: TaskName,
     pub delay: usize,
     pub batch_size: usize,
     pub device: crate::learn::LearnDevice,
+    /// Rayon threads the updates ran on (the algorithm's learner count, as in training).
+    pub threads: usize,
     pub updates: usize,
     pub updates_per_sec: f64,
     pub ms_per_update: f64,
 }
 
 /// Gradient updates per second of `algo` at the sizes of `task` under delay `delay`, on
-/// random batches (the update's cost does not depend on the values).
+/// random batches (the update's cost does not depend on the values), on as many threads as
+/// training gives the algorithm's learners unless `threads` says otherwise.
 pub fn bench_update(
-    algo: crate::algos::Algo,
+    algo: &crate::algos::AlgoSettings,
     task: TaskName,
     delay: usize,
     batch_size: usize,
     device: crate::learn::LearnDevice,
-    lifting: crate::algos::Lifting,
+    threads: Option<usize>,
     updates: usize,
-) -> Result<UpdateBenchReport, crate::learn::LearnError> {
-    use crate::algos::{AgentSpec, Hyper, build_agent, random_batch};
-    let def = task.def();
-    let model = TaskModel::load(task).map_err(|e| crate::learn::LearnError::Load {
-        what: task.to_string(),
-        message: e.to_string(),
-    })?;
-    let spec = AgentSpec {
-        obs_dim: def.obs_dim,
-        act_dim: def.act_dim,
-        delay,
-        action_low: model.action_low.clone(),
-        action_high: model.action_high.clone(),
-    };
+) -> Result<UpdateBenchReport, crate::train::TrainError> {
+    use crate::algos::{AgentSpec, UpdateContext, random_batch};
+    let spec = AgentSpec::for_task(task, delay)?;
     let devices = crate::learn::Devices::new(device)?;
-    let mut agent = build_agent(algo, &spec, &Hyper::default(), &lifting, &devices, 0);
+    let mut agent = algo.build(&spec, &devices, 0)?;
     let batch = random_batch(&spec, batch_size, 1);
-    agent.update(&batch); // warm-up: allocations, lazy initialisation
-    let start = Instant::now();
-    for _ in 0..updates {
-        agent.update(&batch);
-    }
-    let seconds = start.elapsed().as_secs_f64();
+    let threads = threads.unwrap_or(algo.info().learner_threads);
+    let pool = crate::train::learner_pool(threads)?;
+    let seconds = pool.install(|| {
+        let mut update = |k: usize| {
+            agent
+                .update(&mut UpdateContext::fixed(&batch, 0, k as u64))
+                .map(|_| ())
+        };
+        update(0)?; // warm-up: allocations, lazy initialisation
+        let start = Instant::now();
+        for k in 0..updates {
+            update(k + 1)?;
+        }
+        Ok::<f64, crate::delay::ReplayError>(start.elapsed().as_secs_f64())
+    })?;
     Ok(UpdateBenchReport {
-        algo,
+        algo: algo.name(),
         task,
         delay,
         batch_size,
         device,
+        threads,
         updates,
         updates_per_sec: updates as f64 / seconds,
         ms_per_update: 1e3 * seconds / updates as f64,

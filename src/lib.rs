@@ -4,6 +4,7 @@ pub mod bench;
 pub mod delay;
 pub mod learn;
 pub mod rollout;
+pub mod seeds;
 pub mod sim;
 pub mod snapshot;
 pub mod tabular;

@@ -73,6 +73,13 @@ pub struct Delivered {
     pub truncated: Option<bool>,
 }
 
+/// An observation that arrived under random delays: the state `s_τ`, `t − τ` steps old.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Arrival {
+    pub tau: usize,
+    pub obs: Vec<f64>,
+}
+
 /// One printed line of the trace.
 ///
 /// Undelayed: `obs` is the state after step `t`, with that step's reward and flags (`t = 0`
@@ -97,9 +104,9 @@ pub struct TraceStep {
     /// The action the actuators received at step `t − 1`, under actuator noise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub executed: Option<Vec<f64>>,
-    /// Under random delays: the steps τ whose observations arrived at `t` (out of order).
+    /// Under random delays: the observations that arrived at `t` (possibly out of order).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub arrived: Option<Vec<usize>>,
+    pub arrived: Option<Vec<Arrival>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub delivered: Option<Vec<Delivered>>,
 }
@@ -239,6 +246,8 @@ pub fn rollout(
         seed,
     )?;
     layer.reset(&narrow(&obs))?;
+    // The states sent so far, s_0 … s_t, for the arrivals of random delays.
+    let mut sent = vec![narrow(&obs)];
     let ready_line = |layer: &CpuDelayLayer, t: usize| {
         let ready = layer.ready()[0] == 1;
         TraceStep {
@@ -254,6 +263,7 @@ pub fn rollout(
         executed_action(action, noise, &mut rng, &model, &mut executed);
         let outcome = env.step(&executed, &mut obs);
         let (chosen, next) = (narrow(action), narrow(&obs));
+        sent.push(next.clone());
         layer.step(&StepInput {
             actions: &chosen,
             observations: &next,
@@ -280,7 +290,11 @@ pub fn rollout(
         }
         if let Some(bound) = config.random_bound() {
             let arrived = (t.saturating_sub(bound)..t)
-                .filter(|&tau| tau + arrival_delay(seed, 0, 0, tau as u32, bound) == t);
+                .filter(|&tau| tau + arrival_delay(seed, 0, 0, tau as u32, bound) == t)
+                .map(|tau| Arrival {
+                    tau,
+                    obs: widen(&sent[tau]),
+                });
             line.arrived = Some(arrived.collect());
         }
         emit(&line);

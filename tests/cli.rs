@@ -205,34 +205,51 @@ fn delayed_rollout_passes_the_outside_check() {
         "--actions",
         &actions,
     ];
-    let undelayed = write(dir.path(), "undelayed.jsonl", &trace(&base));
-    let steps = undelayed.len();
-    assert!(steps > 0);
-    let cases: [(&str, &[&str]); 6] = [
-        ("0", &["--delay", "0"]),
-        ("3", &["--delay", "3"]),
-        ("7", &["--delay", "7"]),
-        ("5", &["--delay", "2", "--action-delay", "3"]),
-        ("4", &["--random-delay", "--max-delay", "4", "--seed", "9"]),
-        ("60", &["--delay", "60"]),
+    let undelayed_text = trace(&base);
+    let undelayed = write(dir.path(), "undelayed.jsonl", &undelayed_text);
+    // The episode must end by falling, between the short delays and the longest one, so that
+    // episodes end both after and before Δ steps.
+    let steps = undelayed_text.lines().count() - 1;
+    let last: serde_json::Value =
+        serde_json::from_str(undelayed_text.lines().last().unwrap()).unwrap();
+    assert_eq!(last["terminated"], true, "the Hopper falls: {last}");
+    assert!(
+        (8..60).contains(&steps),
+        "the Hopper fell after {steps} steps"
+    );
+    let cases: [(&str, Option<&str>, &[&str]); 6] = [
+        ("0", None, &["--delay", "0"]),
+        ("3", None, &["--delay", "3"]),
+        ("7", None, &["--delay", "7"]),
+        ("5", None, &["--delay", "2", "--action-delay", "3"]),
+        (
+            "4",
+            Some("4"),
+            &["--random-delay", "--max-delay", "4", "--seed", "9"],
+        ),
+        ("60", None, &["--delay", "60"]),
     ];
-    for (delay, options) in cases {
+    for (delay, random_bound, options) in cases {
         let mut args = base.to_vec();
         args.extend_from_slice(options);
         let text = trace(&args);
         let delayed = write(dir.path(), "delayed.jsonl", &text);
+        let mut check = vec![
+            "--delay",
+            delay,
+            "--undelayed",
+            &undelayed,
+            "--delayed",
+            &delayed,
+            "--actions",
+            &actions,
+        ];
+        if let Some(bound) = random_bound {
+            check.extend_from_slice(&["--random-bound", bound]);
+        }
         let out = Command::new(env!("DHRL_PYTHON"))
             .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check_delayed_trace.py"))
-            .args([
-                "--delay",
-                delay,
-                "--undelayed",
-                &undelayed,
-                "--delayed",
-                &delayed,
-                "--actions",
-                &actions,
-            ])
+            .args(&check)
             .output()
             .unwrap();
         assert!(
@@ -251,17 +268,18 @@ fn delayed_rollout_passes_the_outside_check() {
                 "{summary}"
             );
         }
-        if options.contains(&"--random-delay") {
-            let lines: Vec<serde_json::Value> = text
-                .lines()
-                .map(|l| serde_json::from_str(l).unwrap())
-                .collect();
-            let arrivals: usize = lines
-                .iter()
-                .filter_map(|l| l["arrived"].as_array())
-                .map(|a| a.len())
-                .sum();
-            assert!(arrivals > 0, "arrivals are listed under random delays");
+        if random_bound.is_some() {
+            // The checker verified every arrival; here: they were really random.
+            assert!(
+                summary["out_of_order"].as_u64().unwrap() > 0,
+                "random delays never reordered observations: {summary}"
+            );
+            for age in 1..=4 {
+                assert!(
+                    summary["ages"][age.to_string()].as_u64().unwrap() > 0,
+                    "no observation arrived {age} steps old: {summary}"
+                );
+            }
         }
     }
 }

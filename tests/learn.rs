@@ -1,9 +1,12 @@
 //! The SAC pieces against values computed by hand on tiny inputs.
-use burn::module::{Module, ModuleVisitor, Param};
+mod common;
+
+use burn::module::{ModuleVisitor, Param};
 use burn::optim::GradientsParams;
 use burn::prelude::*;
+use common::parameters;
 use dhrl::learn::{
-    Devices, LearnDevice, QNetwork, Temperature, TwinQ, actor_loss, column, critic_loss,
+    Devices, LearnDevice, MlpConfig, QNetwork, Temperature, TwinQ, actor_loss, column, critic_loss,
     critic_target, matrix, polyak, squashed_gaussian_log_prob, temperature_loss, to_vec,
 };
 
@@ -121,19 +124,6 @@ fn temperature_loss_and_its_gradient_match_hand_values() {
     close(to_vec(grad)[0], 0.6, 1e-5);
 }
 
-/// Every parameter of a module, flattened, in declaration order.
-fn parameters<M: Module>(module: &M) -> Vec<f32> {
-    struct Collect(Vec<f32>);
-    impl ModuleVisitor for Collect {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            self.0.extend(to_vec(param.val().inner()));
-        }
-    }
-    let mut all = Collect(Vec::new());
-    module.visit(&mut all);
-    all.0
-}
-
 #[test]
 fn polyak_moves_the_target_by_tau() {
     let d = devices();
@@ -184,4 +174,34 @@ fn target_networks_receive_no_gradient() {
         untracked,
         "Polyak averaging keeps the targets off the autodiff graph"
     );
+}
+
+/// `MlpConfig::new(3, &[4], 2)`: `relu(x·W1 + b1)·W2 + b2`, by hand from its own weights.
+#[test]
+fn mlp_is_linear_layers_with_relu_between() {
+    let d = devices();
+    let mlp = MlpConfig::new(3, &[4], 2).init(&d.plain);
+    assert_eq!(mlp.layers.len(), 2);
+    let weights = |k: usize| to_vec(mlp.layers[k].weight.val());
+    let bias = |k: usize| to_vec(mlp.layers[k].bias.as_ref().unwrap().val());
+    let (w1, b1, w2, b2) = (weights(0), bias(0), weights(1), bias(1));
+    assert_eq!((w1.len(), b1.len(), w2.len(), b2.len()), (12, 4, 8, 2));
+    let x = [0.5f32, -1.0, 2.0, -0.3, 0.8, 0.1];
+    let y = to_vec(mlp.forward(matrix(x.to_vec(), 2, 3, &d.plain)));
+    for row in 0..2 {
+        let h: Vec<f64> = (0..4)
+            .map(|j| {
+                let z = f64::from(b1[j])
+                    + (0..3)
+                        .map(|i| f64::from(x[row * 3 + i]) * f64::from(w1[i * 4 + j]))
+                        .sum::<f64>();
+                z.max(0.0)
+            })
+            .collect();
+        for k in 0..2 {
+            let out =
+                f64::from(b2[k]) + (0..4).map(|j| h[j] * f64::from(w2[j * 2 + k])).sum::<f64>();
+            close(y[row * 2 + k], out, 1e-5);
+        }
+    }
 }

@@ -9,7 +9,7 @@
 
 mod common;
 
-use dhrl::algos::{ActMode, AgentSpec, Algo, Hyper, Lifting, build_agent, random_batch};
+use dhrl::algos::{ActMode, AgentSpec, AlgoSettings, names, random_batch};
 use dhrl::learn::{Devices, LearnDevice, real_gpu_adapters};
 
 /// Whether a real GPU is there; without one the test returns early (or fails when required).
@@ -55,29 +55,31 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
         Devices::new(LearnDevice::Cpu).unwrap(),
         Devices::new(LearnDevice::Wgpu).unwrap(),
     );
-    let (hyper, lifting) = (Hyper::default(), Lifting::default());
-    for algo in [
-        Algo::Sac,
-        Algo::NaiveSac,
-        Algo::AugmentedSac,
-        Algo::Bpql,
-        Algo::D2hpgNaive,
-        Algo::D2hpg,
-    ] {
-        let spec = spec(if algo == Algo::Sac { 0 } else { 3 });
-        let mut on_cpu = build_agent(algo, &spec, &hyper, &lifting, &cpu, 7);
-        let mut on_gpu = build_agent(algo, &spec, &hyper, &lifting, &gpu, 7);
+    for algo in names() {
+        let settings = AlgoSettings::new(algo).unwrap();
+        let spec = spec(if settings.info().undelayed_only { 0 } else { 3 });
+        let mut on_cpu = settings.build(&spec, &cpu, 7).unwrap();
+        let mut on_gpu = settings.build(&spec, &gpu, 7).unwrap();
         let saved = tempfile::tempdir().unwrap();
         on_cpu.save(saved.path()).unwrap();
         on_gpu.load(saved.path()).unwrap();
         for step in 0..5 {
             let batch = random_batch(&spec, 64, 100 + step);
-            let (a, b) = (on_cpu.update(&batch), on_gpu.update(&batch));
+            let (a, b) = (
+                common::update(on_cpu.as_mut(), &batch),
+                common::update(on_gpu.as_mut(), &batch),
+            );
+            assert_eq!(
+                a.len(),
+                b.len(),
+                "{algo}: statistics {a:?} on CPU, {b:?} on wgpu"
+            );
+            assert!(!a.is_empty(), "{algo}: an update reports its losses");
             for ((name, x), (other, y)) in a.iter().zip(&b) {
                 assert_eq!(name, other);
                 assert!(
                     close(*x, *y, 1e-3),
-                    "{algo:?} update {step}: {name} {x} on CPU, {y} on wgpu"
+                    "{algo} update {step}: {name} {x} on CPU, {y} on wgpu"
                 );
             }
         }
@@ -86,19 +88,34 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
             on_cpu.act(&probe.augmented, 16, ActMode::Deterministic),
             on_gpu.act(&probe.augmented, 16, ActMode::Deterministic),
         );
+        assert_eq!(
+            (a.len(), b.len()),
+            (16 * 2, 16 * 2),
+            "{algo}: one action per state"
+        );
         for (x, y) in a.iter().zip(&b) {
             assert!(
                 close(f64::from(*x), f64::from(*y), 1e-3),
-                "{algo:?}: action {x} on CPU, {y} on wgpu"
+                "{algo}: action {x} on CPU, {y} on wgpu"
             );
         }
-        if let Some(free) = on_gpu.act_delay_free(&probe.state, 16) {
-            let reference = on_cpu.act_delay_free(&probe.state, 16).unwrap();
+        let learns_delay_free = settings.info().delay_free_policy;
+        let (reference, free) = (
+            on_cpu.act_delay_free(&probe.state, 16),
+            on_gpu.act_delay_free(&probe.state, 16),
+        );
+        assert_eq!(
+            (reference.is_some(), free.is_some()),
+            (learns_delay_free, learns_delay_free),
+            "{algo}: a delay-free policy on CPU and on wgpu exactly for the D2HPG variants"
+        );
+        if let (Some(reference), Some(free)) = (reference, free) {
+            assert_eq!((reference.len(), free.len()), (16 * 2, 16 * 2));
             assert!(
                 free.iter()
                     .zip(&reference)
                     .all(|(y, x)| close(f64::from(*x), f64::from(*y), 1e-3)),
-                "{algo:?}: delay-free actions {reference:?} on CPU, {free:?} on wgpu"
+                "{algo}: delay-free actions {reference:?} on CPU, {free:?} on wgpu"
             );
         }
     }

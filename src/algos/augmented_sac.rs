@@ -3,9 +3,34 @@
 //! at the price of an input that grows with Δ; training uses `(x_t, a_t, r_t, x_{t+1})`.
 //! Everything else is [`super::sac`]'s update.
 use super::sac::{InputView, SacAgent};
-use super::{AgentSpec, Hyper};
+use super::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig};
 use crate::learn::Devices;
 
-pub fn augmented_sac(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u64) -> SacAgent {
-    SacAgent::new(InputView::Augmented, spec, hyper, devices, seed)
+crate::algo_config! {
+    /// Augmented SAC's configuration: SAC's.
+    pub struct Config {
+        ..sac: SacConfig;
+    }
+}
+
+impl AlgoConfig for Config {
+    const INFO: AlgoInfo = AlgoInfo::single_learner(
+        "augmented-sac",
+        "SAC with actor and critic on the augmented state x_t",
+        true,
+    );
+
+    fn validate(&self) -> Result<(), AlgoError> {
+        self.sac.check(Self::INFO.name)
+    }
+
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        Box::new(SacAgent::new(
+            InputView::Augmented,
+            spec,
+            &self.sac,
+            devices,
+            seed,
+        ))
+    }
 }

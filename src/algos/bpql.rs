@@ -12,10 +12,35 @@
 //! D2HPG (`d2hpg.rs`).
 use std::path::Path;
 
-use super::sac::{SacLearner, transition_tensors};
-use super::{ActMode, Agent, AgentSpec, Hyper};
-use crate::delay::Transitions;
+use super::sac::{SacLearner, SacStats, transition_tensors};
+use super::{
+    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig, Stats, UpdateContext,
+};
+use crate::delay::ReplayError;
 use crate::learn::{Devices, LearnError};
+
+crate::algo_config! {
+    /// BPQL's configuration: SAC's.
+    pub struct Config {
+        ..sac: SacConfig;
+    }
+}
+
+impl AlgoConfig for Config {
+    const INFO: AlgoInfo = AlgoInfo::single_learner(
+        "bpql",
+        "actor on x_t, beta critic on the time-aligned true state s_t",
+        true,
+    );
+
+    fn validate(&self) -> Result<(), AlgoError> {
+        self.sac.check(Self::INFO.name)
+    }
+
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        Box::new(Bpql::new(spec, &self.sac, devices, seed))
+    }
+}
 
 pub struct Bpql {
     spec: AgentSpec,
@@ -24,7 +49,12 @@ pub struct Bpql {
 
 /// BPQL's learner: a [`SacLearner`] with the actor on `x` and the critics on `s`. D2HPG's
 /// regular learner is the same.
-pub fn bpql_learner(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u64) -> SacLearner {
+pub fn bpql_learner(
+    spec: &AgentSpec,
+    hyper: &SacConfig,
+    devices: &Devices,
+    seed: u64,
+) -> SacLearner {
     SacLearner::new(
         spec.augmented_dim(),
         spec.obs_dim,
@@ -36,7 +66,7 @@ pub fn bpql_learner(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u6
 }
 
 impl Bpql {
-    pub fn new(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u64) -> Bpql {
+    pub fn new(spec: &AgentSpec, hyper: &SacConfig, devices: &Devices, seed: u64) -> Bpql {
         Bpql {
             spec: spec.clone(),
             learner: bpql_learner(spec, hyper, devices, seed),
@@ -50,11 +80,16 @@ impl Agent for Bpql {
             .act(augmented, rows, self.spec.augmented_dim(), mode)
     }
 
-    fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {
+    fn stat_names(&self) -> Vec<&'static str> {
+        SacStats::NAMES.to_vec()
+    }
+
+    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
+        let batch = ctx.batch()?;
         let stats = self
             .learner
-            .update(&transition_tensors(batch, &self.learner.devices.plain));
-        stats.named()
+            .update(&transition_tensors(&batch, &self.learner.devices.plain));
+        Ok(stats.named())
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {

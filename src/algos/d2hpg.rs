@@ -24,28 +24,99 @@ use serde::{Deserialize, Serialize};
 
 use super::bpql::bpql_learner;
 use super::sac::{SacBatch, SacLearner, transition_tensors};
-use super::{ActMode, Agent, AgentSpec, Hyper};
-use crate::delay::Transitions;
+use super::{
+    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, SacConfig,
+    Stats, UpdateContext, check,
+};
+use crate::delay::ReplayError;
 use crate::learn::{Devices, LearnError, Noise, lifting_loss, squashed_samples_k};
+use crate::seeds;
 
-/// How strongly, and from how many samples, the regular policy is lifted.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Lifting {
-    /// λ, the weight of `L_lift` in the regular actor's loss.
-    pub weight: f64,
-    /// K, samples per state for the means and standard deviations (at least 2).
-    pub samples: usize,
+crate::algo_config! {
+    /// D2HPG's configuration: SAC's, for both learners, and the lifting loss.
+    pub struct Config {
+        ..sac: SacConfig;
+        /// λ, the weight of L_lift in the regular actor's loss (1: ahead of the settings
+        /// compared in the README on HalfCheetah at Δ = 10, two seeds).
+        pub lifting_weight: f64 = 1.0,
+        /// K, samples per state for the means and standard deviations of L_lift (at least 2).
+        pub lifting_samples: usize = 2,
+    }
 }
 
-impl Default for Lifting {
-    /// λ = 1, K = 2: ahead of the other settings compared in the README on HalfCheetah at
-    /// Δ = 10 (two seeds); InvertedPendulum at Δ = 10 does not separate them.
-    fn default() -> Lifting {
-        Lifting {
-            weight: 1.0,
-            samples: 2,
-        }
+impl Config {
+    fn check(&self, algo: &'static str) -> Result<(), AlgoError> {
+        self.sac.check(algo)?;
+        check(
+            self.lifting_weight >= 0.0 && self.lifting_weight.is_finite(),
+            algo,
+            "lifting_weight",
+            "a finite number ≥ 0",
+            self.lifting_weight,
+        )?;
+        check(
+            self.lifting_samples >= 2,
+            algo,
+            "lifting_samples",
+            "at least 2 (standard deviations need two samples)",
+            self.lifting_samples,
+        )
+    }
+}
+
+/// What both variants declare, but for their names.
+const D2HPG_INFO: AlgoInfo = AlgoInfo {
+    name: "d2hpg",
+    about: "the paper's D2HPG(-BPQL): BPQL, a delay-free SAC, and the lifting loss",
+    acts_on_augmented_state: true,
+    delay_free_policy: true,
+    undelayed_only: false,
+    learner_threads: 2,
+    label_fields: &[("λ", "lifting_weight"), ("K", "lifting_samples")],
+};
+
+impl AlgoConfig for Config {
+    const INFO: AlgoInfo = D2HPG_INFO;
+
+    fn validate(&self) -> Result<(), AlgoError> {
+        self.check(Self::INFO.name)
+    }
+
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        Box::new(D2hpg::new(Regular::Bpql, self, spec, devices, seed))
+    }
+}
+
+/// `d2hpg-naive`'s configuration: D2HPG's (its regular learner uses the actor part only).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct NaiveConfig(pub Config);
+
+impl ConfigFields for NaiveConfig {
+    fn field_docs() -> Vec<FieldDoc> {
+        Config::field_docs()
+    }
+}
+
+impl AlgoConfig for NaiveConfig {
+    const INFO: AlgoInfo = AlgoInfo {
+        name: "d2hpg-naive",
+        about: "a delay-free SAC plus a regular policy trained by the lifting loss only",
+        ..D2HPG_INFO
+    };
+
+    fn validate(&self) -> Result<(), AlgoError> {
+        self.0.check(Self::INFO.name)
+    }
+
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        Box::new(D2hpg::new(
+            Regular::LiftingOnly,
+            &self.0,
+            spec,
+            devices,
+            seed,
+        ))
     }
 }
 
@@ -58,18 +129,12 @@ pub enum Regular {
     LiftingOnly,
 }
 
-/// The seed of the delay-free learner of a D2HPG agent seeded with `seed`: the learner is the
-/// same as a delay-free [`SacLearner`] built with this seed.
-pub fn delay_free_seed(seed: u64) -> u64 {
-    seed ^ 0xA857_AC7
-}
-/// Seed offset of the lifting loss's samples.
-const LIFTING_SEED: u64 = 0x11F7;
-
 pub struct D2hpg {
     spec: AgentSpec,
     regular_kind: Regular,
-    lifting: Lifting,
+    /// λ and K.
+    lifting_weight: f64,
+    lifting_samples: usize,
     /// Actor on `x`, beta critic on `s` (BPQL); only the actor is used by `d2hpg-naive`.
     regular: SacLearner,
     /// SAC on the true state: the abstract policy and critic.
@@ -80,26 +145,26 @@ pub struct D2hpg {
 impl D2hpg {
     pub fn new(
         regular_kind: Regular,
-        lifting: Lifting,
+        config: &Config,
         spec: &AgentSpec,
-        hyper: &Hyper,
         devices: &Devices,
         seed: u64,
     ) -> D2hpg {
         D2hpg {
             spec: spec.clone(),
             regular_kind,
-            lifting,
-            regular: bpql_learner(spec, hyper, devices, seed),
+            lifting_weight: config.lifting_weight,
+            lifting_samples: config.lifting_samples,
+            regular: bpql_learner(spec, &config.sac, devices, seed),
             delay_free: SacLearner::new(
                 spec.obs_dim,
                 spec.obs_dim,
                 spec,
-                hyper,
+                &config.sac,
                 devices,
-                delay_free_seed(seed),
+                seeds::delay_free_learner(seed),
             ),
-            lifting_noise: Noise::new(seed ^ LIFTING_SEED),
+            lifting_noise: Noise::new(seeds::lifting_noise(seed)),
         }
     }
 }
@@ -117,7 +182,21 @@ impl Agent for D2hpg {
         )
     }
 
-    fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {
+    fn stat_names(&self) -> Vec<&'static str> {
+        let regular: &[&'static str] = match self.regular_kind {
+            Regular::Bpql => &["critic_loss", "actor_loss", "alpha"],
+            Regular::LiftingOnly => &[],
+        };
+        let free = ["free_critic_loss", "free_actor_loss", "free_alpha"];
+        free.iter()
+            .chain(regular)
+            .chain(&["lifting_loss"])
+            .copied()
+            .collect()
+    }
+
+    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
+        let batch = &ctx.batch()?;
         let plain = self.regular.devices.plain.clone();
         let regular_batch = transition_tensors(batch, &plain);
         let free_batch = SacBatch {
@@ -125,7 +204,7 @@ impl Agent for D2hpg {
             next_actor_input: regular_batch.next_critic_input.clone(),
             ..regular_batch.clone()
         };
-        let (rows, k, act) = (batch.len(), self.lifting.samples, self.spec.act_dim);
+        let (rows, k, act) = (batch.len(), self.lifting_samples, self.spec.act_dim);
         let with_bpql = self.regular_kind == Regular::Bpql;
         let (regular, delay_free) = (&mut self.regular, &mut self.delay_free);
         let (alpha, free_alpha) = (regular.temperature.alpha(), delay_free.temperature.alpha());
@@ -162,7 +241,7 @@ impl Agent for D2hpg {
         let regular_actions = squashed_samples_k(regular_distribution.clone(), eps, &regular.scale);
         let lifting = lifting_loss(regular_actions, free_actions);
         let lifting_value = f64::from(lifting.clone().inner().into_scalar::<f32>());
-        let lift = lifting.mul_scalar(self.lifting.weight);
+        let lift = lifting.mul_scalar(self.lifting_weight);
 
         // 3. The policies, side by side again: `d2hpg` takes BPQL's actor step with λ·L_lift
         //    in its loss, `d2hpg-naive` steps on λ·L_lift alone; the delay-free learner takes
@@ -194,7 +273,7 @@ impl Agent for D2hpg {
             ]);
         }
         stats.push(("lifting_loss", lifting_value));
-        stats
+        Ok(stats)
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {

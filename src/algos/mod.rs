@@ -1,6 +1,6 @@
-//! The algorithms, each readable top to bottom in its own file, behind one [`Agent`]
-//! interface that the training loop drives: act on the augmented states of the ready copies,
-//! update from a batch of time-aligned transitions, save and load.
+//! The algorithms, each readable top to bottom in its own file — its configuration first, then
+//! its losses and its [`Agent`] — and the one registry line per algorithm that makes it known
+//! to `dhrl train --algo`, `config.toml`, evaluation and the benches.
 //!
 //! Every transition carries both what the delayed agent saw (`x_τ`, `x_{τ+1}`) and the true
 //! states (`s_τ`, `s_{τ+1}`), so learners on the true state (BPQL's critic, D2HPG's delay-free
@@ -8,67 +8,55 @@
 
 mod augmented_sac;
 mod bpql;
+mod context;
 mod d2hpg;
 mod naive_sac;
+mod registry;
 mod sac;
+mod settings;
 
 use std::path::Path;
 
-use serde::{Deserialize, Serialize};
-
-use crate::delay::Transitions;
-use crate::learn::{Devices, LearnError};
-
 pub use bpql::Bpql;
-pub use d2hpg::{D2hpg, Lifting, Regular, delay_free_seed};
-pub use sac::{InputView, SacAgent, SacBatch, SacLearner, SacStats};
+pub use context::UpdateContext;
+pub use d2hpg::{Config as D2hpgConfig, D2hpg, Regular};
+pub use registry::{
+    AlgoConfig, AlgoError, AlgoInfo, Algorithm, ConfigFields, FieldDoc, Registered, check,
+    toml_value,
+};
+pub use sac::{Config as SacConfig, InputView, SacAgent, SacBatch, SacLearner, SacStats};
+pub use settings::AlgoSettings;
 
-/// The algorithms `dhrl train --algo` accepts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-#[value(rename_all = "kebab-case")]
-pub enum Algo {
-    /// Delay-free SAC on the true state (Δ = 0 only): the upper reference.
-    Sac,
-    /// SAC on the last received observation `s_{t-Δ}` only (memoryless).
-    NaiveSac,
-    /// SAC with actor and critic on the augmented state `x_t`.
-    AugmentedSac,
-    /// Actor on `x_t`, "beta" critic on the time-aligned true state.
-    Bpql,
-    /// Delay-free SAC plus a regular policy trained by the lifting loss only.
-    D2hpgNaive,
-    /// The paper's D2HPG(-BPQL): BPQL, a delay-free SAC, and the lifting loss.
-    D2hpg,
+use crate::delay::{BatchExtras, ReplayError, Transitions};
+use crate::learn::LearnError;
+use crate::sim::{SimError, TaskModel};
+use crate::tasks::TaskName;
+
+/// Every algorithm, one line each: the registry.
+pub static ALGORITHMS: &[&dyn Algorithm] = &[
+    &Registered::<sac::Config>::new(),
+    &Registered::<naive_sac::Config>::new(),
+    &Registered::<augmented_sac::Config>::new(),
+    &Registered::<bpql::Config>::new(),
+    &Registered::<d2hpg::NaiveConfig>::new(),
+    &Registered::<d2hpg::Config>::new(),
+];
+
+/// The registered algorithm called `name`.
+pub fn algorithm(name: &str) -> Result<&'static dyn Algorithm, AlgoError> {
+    ALGORITHMS
+        .iter()
+        .copied()
+        .find(|a| a.info().name == name)
+        .ok_or_else(|| AlgoError::UnknownAlgorithm {
+            name: name.to_string(),
+            valid: names().join(", "),
+        })
 }
 
-impl Algo {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Algo::Sac => "sac",
-            Algo::NaiveSac => "naive-sac",
-            Algo::AugmentedSac => "augmented-sac",
-            Algo::Bpql => "bpql",
-            Algo::D2hpgNaive => "d2hpg-naive",
-            Algo::D2hpg => "d2hpg",
-        }
-    }
-}
-
-impl Algo {
-    /// Whether the acting policy's input is the augmented state `x_t` (its size grows with Δ).
-    pub fn acts_on_augmented_state(self) -> bool {
-        matches!(
-            self,
-            Algo::AugmentedSac | Algo::Bpql | Algo::D2hpgNaive | Algo::D2hpg
-        )
-    }
-}
-
-impl std::fmt::Display for Algo {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
+/// The names `--algo` accepts, in registry order.
+pub fn names() -> Vec<&'static str> {
+    ALGORITHMS.iter().map(|a| a.info().name).collect()
 }
 
 /// Sizes an agent is built for.
@@ -83,37 +71,24 @@ pub struct AgentSpec {
 }
 
 impl AgentSpec {
+    /// The sizes of a task's model under a total delay Δ.
+    pub fn for_model(model: &TaskModel, delay: usize) -> AgentSpec {
+        AgentSpec {
+            obs_dim: model.task.obs_dim,
+            act_dim: model.task.act_dim,
+            delay,
+            action_low: model.action_low.clone(),
+            action_high: model.action_high.clone(),
+        }
+    }
+
+    /// The sizes of `task` under a total delay Δ (loads its model for the action bounds).
+    pub fn for_task(task: TaskName, delay: usize) -> Result<AgentSpec, SimError> {
+        Ok(AgentSpec::for_model(&*TaskModel::load(task)?, delay))
+    }
+
     pub fn augmented_dim(&self) -> usize {
         self.obs_dim + self.delay * self.act_dim
-    }
-}
-
-/// Hyperparameters shared by the SAC family (SPEC §3).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Hyper {
-    pub gamma: f64,
-    /// Polyak coefficient of the target critics.
-    pub tau: f64,
-    /// Adam learning rate of every network and of the temperature.
-    pub learning_rate: f64,
-    /// Adam's ε (PyTorch's 1e-8, not burn's default 1e-5).
-    pub adam_epsilon: f64,
-    pub initial_alpha: f64,
-    /// Learn α toward the target entropy −dim(A); false keeps it fixed.
-    pub autotune_alpha: bool,
-}
-
-impl Default for Hyper {
-    fn default() -> Hyper {
-        Hyper {
-            gamma: 0.99,
-            tau: 0.005,
-            learning_rate: 3e-4,
-            adam_epsilon: 1e-8,
-            initial_alpha: 0.2,
-            autotune_alpha: true,
-        }
     }
 }
 
@@ -126,54 +101,31 @@ pub enum ActMode {
     Deterministic,
 }
 
+/// Named statistics of one update, a subset of the agent's [`Agent::stat_names`].
+pub type Stats = Vec<(&'static str, f64)>;
+
 /// What the training loop needs of an algorithm.
-pub trait Agent {
+pub trait Agent: Send {
     /// Actions `[rows, act_dim]` for `rows` augmented states `[rows, obs + Δ·act]`.
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32>;
-    /// Deterministic actions of a delay-free policy for `rows` true states `[rows, obs]`, for
-    /// algorithms that learn one (D2HPG's abstract policy), evaluated undelayed.
+    /// Deterministic actions of the delay-free policy for `rows` true states `[rows, obs]`,
+    /// evaluated undelayed; `None` unless [`AlgoInfo::delay_free_policy`] says there is one.
     fn act_delay_free(&mut self, _states: &[f32], _rows: usize) -> Option<Vec<f32>> {
         None
     }
-    /// One gradient update of every learner from a batch; returns named statistics.
-    fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)>;
+    /// The statistics [`Agent::update`] may report, in `train.csv`'s column order.
+    fn stat_names(&self) -> Vec<&'static str>;
+    /// The optional batch fields the agent samples (none by default).
+    fn batch_extras(&self) -> BatchExtras {
+        BatchExtras::default()
+    }
+    /// One update of every learner: draws its batches from `ctx` (as many as it needs),
+    /// returns the statistics it computed this time (an absent one is logged empty).
+    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError>;
     /// Networks, optimiser states and random streams, into `dir`.
     fn save(&self, dir: &Path) -> Result<(), LearnError>;
     /// Restores what [`Agent::save`] wrote.
     fn load(&mut self, dir: &Path) -> Result<(), LearnError>;
-}
-
-/// Builds the agent of `algo` (`lifting` is used by the D2HPG variants only).
-pub fn build_agent(
-    algo: Algo,
-    spec: &AgentSpec,
-    hyper: &Hyper,
-    lifting: &Lifting,
-    devices: &Devices,
-    seed: u64,
-) -> Box<dyn Agent> {
-    match algo {
-        Algo::Bpql => Box::new(Bpql::new(spec, hyper, devices, seed)),
-        Algo::D2hpgNaive => Box::new(D2hpg::new(
-            Regular::LiftingOnly,
-            *lifting,
-            spec,
-            hyper,
-            devices,
-            seed,
-        )),
-        Algo::D2hpg => Box::new(D2hpg::new(
-            Regular::Bpql,
-            *lifting,
-            spec,
-            hyper,
-            devices,
-            seed,
-        )),
-        Algo::Sac => Box::new(sac::delay_free_sac(spec, hyper, devices, seed)),
-        Algo::NaiveSac => Box::new(naive_sac::naive_sac(spec, hyper, devices, seed)),
-        Algo::AugmentedSac => Box::new(augmented_sac::augmented_sac(spec, hyper, devices, seed)),
-    }
 }
 
 /// `n` random transitions at `spec`'s sizes (values uniform in [−1, 1), every fifth one
@@ -199,5 +151,6 @@ pub fn random_batch(spec: &AgentSpec, n: usize, seed: u64) -> Transitions {
         next_augmented: random(n * aug),
         next_state: random(n * obs),
         terminated: (0..n).map(|i| u32::from(i % 5 == 0)).collect(),
+        intermediate_states: Vec::new(),
     }
 }

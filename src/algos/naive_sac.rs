@@ -3,9 +3,34 @@
 //! `(s_{t-Δ}, a_t, r_t, s_{t-Δ+1})` as if that were an MDP — it is not, which is why it fails
 //! at long delays. Everything else is [`super::sac`]'s update.
 use super::sac::{InputView, SacAgent};
-use super::{AgentSpec, Hyper};
+use super::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig};
 use crate::learn::Devices;
 
-pub fn naive_sac(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u64) -> SacAgent {
-    SacAgent::new(InputView::LastObservation, spec, hyper, devices, seed)
+crate::algo_config! {
+    /// Naive SAC's configuration: SAC's.
+    pub struct Config {
+        ..sac: SacConfig;
+    }
+}
+
+impl AlgoConfig for Config {
+    const INFO: AlgoInfo = AlgoInfo::single_learner(
+        "naive-sac",
+        "SAC on the last received observation s_{t-Δ} only (memoryless)",
+        false,
+    );
+
+    fn validate(&self) -> Result<(), AlgoError> {
+        self.sac.check(Self::INFO.name)
+    }
+
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        Box::new(SacAgent::new(
+            InputView::LastObservation,
+            spec,
+            &self.sac,
+            devices,
+            seed,
+        ))
+    }
 }

@@ -11,12 +11,99 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 
-use super::{ActMode, Agent, AgentSpec, Hyper};
-use crate::delay::Transitions;
+use super::{
+    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, UpdateContext, check,
+};
+use crate::delay::{ReplayError, Transitions};
 use crate::learn::{
     ActionScale, Devices, GaussianPolicy, LearnError, Noise, Temperature, TwinQ, actor_loss,
     column, critic_loss, critic_target, matrix, polyak, squashed_sample, temperature_loss, to_vec,
 };
+
+crate::algo_config! {
+    /// SAC's hyperparameters (SPEC §3): the configuration of `sac`, and the shared part of
+    /// every algorithm built on [`SacLearner`].
+    pub struct Config {
+        /// Discount factor γ.
+        pub gamma: f64 = 0.99,
+        /// Polyak coefficient τ of the target critics.
+        pub tau: f64 = 0.005,
+        /// Adam learning rate of every network and of the temperature.
+        pub learning_rate: f64 = 3e-4,
+        /// Adam's ε (PyTorch's 1e-8, not burn's default 1e-5).
+        pub adam_epsilon: f64 = 1e-8,
+        /// Initial entropy temperature α.
+        pub initial_alpha: f64 = 0.2,
+        /// Learn α toward the target entropy −dim(A); false keeps it fixed.
+        pub autotune_alpha: bool = true,
+    }
+}
+
+impl Config {
+    /// Checks the SAC fields, naming `algo` in the errors.
+    pub fn check(&self, algo: &'static str) -> Result<(), AlgoError> {
+        check(
+            (0.0..1.0).contains(&self.gamma),
+            algo,
+            "gamma",
+            "in [0, 1)",
+            self.gamma,
+        )?;
+        check(
+            self.tau > 0.0 && self.tau <= 1.0,
+            algo,
+            "tau",
+            "in (0, 1]",
+            self.tau,
+        )?;
+        check(
+            self.learning_rate > 0.0 && self.learning_rate.is_finite(),
+            algo,
+            "learning_rate",
+            "a positive number",
+            self.learning_rate,
+        )?;
+        check(
+            self.adam_epsilon > 0.0 && self.adam_epsilon.is_finite(),
+            algo,
+            "adam_epsilon",
+            "a positive number",
+            self.adam_epsilon,
+        )?;
+        check(
+            self.initial_alpha > 0.0 && self.initial_alpha.is_finite(),
+            algo,
+            "initial_alpha",
+            "a positive number",
+            self.initial_alpha,
+        )
+    }
+}
+
+impl AlgoConfig for Config {
+    const INFO: AlgoInfo = AlgoInfo {
+        undelayed_only: true,
+        ..AlgoInfo::single_learner(
+            "sac",
+            "delay-free SAC on the true state (Δ = 0 only): the upper reference",
+            false,
+        )
+    };
+
+    fn validate(&self) -> Result<(), AlgoError> {
+        self.check(Self::INFO.name)
+    }
+
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        Box::new(SacAgent::new(
+            InputView::TrueState,
+            spec,
+            self,
+            devices,
+            seed,
+        ))
+    }
+}
 
 /// Losses and temperature of one update.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -28,14 +115,18 @@ pub struct SacStats {
 }
 
 impl SacStats {
+    /// Their `train.csv` columns.
+    pub const NAMES: [&'static str; 4] = ["critic_loss", "actor_loss", "alpha", "alpha_loss"];
+
     /// The statistics as `train.csv` columns.
-    pub fn named(&self) -> Vec<(&'static str, f64)> {
-        vec![
-            ("critic_loss", self.critic_loss),
-            ("actor_loss", self.actor_loss),
-            ("alpha", self.alpha),
-            ("alpha_loss", self.alpha_loss),
-        ]
+    pub fn named(&self) -> Stats {
+        let values = [
+            self.critic_loss,
+            self.actor_loss,
+            self.alpha,
+            self.alpha_loss,
+        ];
+        Self::NAMES.into_iter().zip(values).collect()
     }
 }
 
@@ -51,7 +142,7 @@ pub(crate) fn materialize<M: Module>(module: &M) {
     module.visit(&mut Touch);
 }
 
-pub(crate) fn adam(hyper: &Hyper) -> ModuleOptimizer {
+pub(crate) fn adam(hyper: &Config) -> ModuleOptimizer {
     AdamConfig::new()
         .with_epsilon(hyper.adam_epsilon as f32)
         .init()
@@ -96,7 +187,7 @@ pub struct SacLearner {
     critic_opt: ModuleOptimizer,
     temperature_opt: ModuleOptimizer,
     pub scale: ActionScale,
-    hyper: Hyper,
+    hyper: Config,
     /// `H̄ = −dim(A)`.
     target_entropy: f64,
     pub devices: Devices,
@@ -111,7 +202,7 @@ impl SacLearner {
         actor_dim: usize,
         critic_dim: usize,
         spec: &AgentSpec,
-        hyper: &Hyper,
+        hyper: &Config,
         devices: &Devices,
         seed: u64,
     ) -> SacLearner {
@@ -129,10 +220,10 @@ impl SacLearner {
             critic_opt: adam(hyper),
             temperature_opt: adam(hyper),
             scale: ActionScale::new(&spec.action_low, &spec.action_high, &devices.plain),
-            hyper: *hyper,
+            hyper: hyper.clone(),
             target_entropy: -(spec.act_dim as f64),
             devices: devices.clone(),
-            noise: Noise::new(seed ^ 0x5AC),
+            noise: Noise::new(crate::seeds::learner_noise(seed)),
             act_dim: spec.act_dim,
         }
     }
@@ -449,7 +540,7 @@ impl SacAgent {
     pub fn new(
         view: InputView,
         spec: &AgentSpec,
-        hyper: &Hyper,
+        hyper: &Config,
         devices: &Devices,
         seed: u64,
     ) -> SacAgent {
@@ -468,11 +559,6 @@ impl SacAgent {
     }
 }
 
-/// Delay-free SAC on the true state: the upper reference, run with Δ = 0.
-pub fn delay_free_sac(spec: &AgentSpec, hyper: &Hyper, devices: &Devices, seed: u64) -> SacAgent {
-    SacAgent::new(InputView::TrueState, spec, hyper, devices, seed)
-}
-
 impl Agent for SacAgent {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         let view = match self.view {
@@ -485,7 +571,12 @@ impl Agent for SacAgent {
             .act(&inputs, rows, view.width(&self.spec), mode)
     }
 
-    fn update(&mut self, batch: &Transitions) -> Vec<(&'static str, f64)> {
+    fn stat_names(&self) -> Vec<&'static str> {
+        SacStats::NAMES.to_vec()
+    }
+
+    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
+        let batch = &ctx.batch()?;
         let plain = self.learner.devices.plain.clone();
         let (input, next_input) = self.view.of_batch(batch, &self.spec);
         let (input, next_input) = (
@@ -499,7 +590,7 @@ impl Agent for SacAgent {
             next_critic_input: next_input,
             ..transition_tensors(batch, &plain)
         });
-        stats.named()
+        Ok(stats.named())
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {

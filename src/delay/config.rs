@@ -53,6 +53,8 @@ pub enum DelayError {
     TooLong { total: usize },
     #[error("actuator noise σ must be a finite number ≥ 0, got {0}")]
     BadNoise(f64),
+    #[error("the GPU delay layer: {0}")]
+    Gpu(String),
     #[error("{what} has length {found}, expected {expected}")]
     WrongLength {
         what: &'static str,

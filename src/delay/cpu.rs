@@ -1,13 +1,15 @@
 //! The reference implementation of the delay layer, and the CPU fallback.
 use rayon::prelude::*;
 
+use super::layer::{DelayLayer, LayerState, LayerStateMut, read_state, write_state};
 use super::layout::{
     CopyCounters, DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED, RecordMeta,
 };
 use super::records::{RecordBatch, StepInput};
 use super::warmup::WarmupFiller;
 use super::{DelayConfig, DelayError};
-use crate::snapshot::{SnapshotError, read_section, write_section};
+use crate::snapshot::SnapshotError;
+use std::io::{Read, Write};
 
 /// The delay layer on the CPU: per copy, a ring of the last 2Δ + 3 steps `(s_τ, a_τ, r_τ)`.
 pub struct CpuDelayLayer {
@@ -38,6 +40,16 @@ pub struct Transitions {
     pub next_state: Vec<f32>,
     /// 1 where the MDP ended (no bootstrapping); truncation is 0 (bootstrap).
     pub terminated: Vec<u32>,
+    /// `[B, Δ, obs]`: the true states `s_{τ-Δ+1} … s_τ` between the observation inside `x_τ`
+    /// and `s_τ`, when asked for ([`BatchExtras::intermediate_states`]); empty otherwise.
+    pub intermediate_states: Vec<f32>,
+}
+
+/// Optional fields of sampled batches, rebuilt from the replay's step records on request.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BatchExtras {
+    /// [`Transitions::intermediate_states`].
+    pub intermediate_states: bool,
 }
 
 impl Transitions {
@@ -197,36 +209,6 @@ impl CpuDelayLayer {
         Ok(())
     }
 
-    /// Writes the layer's state (counters, rings, outputs, warm-up random stream).
-    pub fn save(&self, out: &mut impl std::io::Write) -> Result<(), SnapshotError> {
-        write_section(out, &self.counters)?;
-        write_section(out, &self.ring)?;
-        write_section(out, &self.augmented)?;
-        write_section(out, &self.ready)?;
-        write_section(out, &self.records.counts)?;
-        write_section(out, &self.records.meta)?;
-        write_section(out, &self.records.data)?;
-        let rng = serde_json::to_vec(self.warmup.rng()).map_err(std::io::Error::other)?;
-        write_section(out, &rng)
-    }
-
-    /// Restores what [`CpuDelayLayer::save`] wrote for a layer of the same layout.
-    pub fn load(&mut self, input: &mut impl std::io::Read) -> Result<(), SnapshotError> {
-        read_section(input, "delay counters", &mut self.counters)?;
-        read_section(input, "delay ring", &mut self.ring)?;
-        read_section(input, "augmented states", &mut self.augmented)?;
-        read_section(input, "ready flags", &mut self.ready)?;
-        read_section(input, "record counts", &mut self.records.counts)?;
-        read_section(input, "record metadata", &mut self.records.meta)?;
-        read_section(input, "record data", &mut self.records.data)?;
-        let mut len = [0u8; 8];
-        input.read_exact(&mut len)?;
-        let mut rng = vec![0u8; u64::from_le_bytes(len) as usize];
-        input.read_exact(&mut rng)?;
-        *self.warmup.rng_mut() = serde_json::from_slice(&rng).map_err(std::io::Error::other)?;
-        Ok(())
-    }
-
     /// `[N, obs + Δ·act]`: `x_t` of every copy (zeros where not ready).
     pub fn augmented(&self) -> &[f32] {
         &self.augmented
@@ -276,6 +258,56 @@ impl CpuDelayLayer {
     }
 }
 
+impl DelayLayer for CpuDelayLayer {
+    fn layout(&self) -> DelayLayout {
+        self.layout
+    }
+    fn reset(&mut self, observations: &[f32]) -> Result<(), DelayError> {
+        CpuDelayLayer::reset(self, observations)
+    }
+    fn step(&mut self, input: &StepInput<'_>) -> Result<(), DelayError> {
+        CpuDelayLayer::step(self, input)
+    }
+    fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), DelayError> {
+        CpuDelayLayer::fill_warmup(self, actions)
+    }
+    fn augmented(&self) -> &[f32] {
+        &self.augmented
+    }
+    fn ready(&self) -> &[u32] {
+        &self.ready
+    }
+    fn records(&self) -> &RecordBatch {
+        &self.records
+    }
+    fn save(&self, out: &mut dyn Write) -> Result<(), SnapshotError> {
+        write_state(
+            out,
+            LayerState {
+                counters: &self.counters,
+                ring: &self.ring,
+                augmented: &self.augmented,
+                ready: &self.ready,
+                records: &self.records,
+                rng: self.warmup.rng(),
+            },
+        )
+    }
+    fn load(&mut self, input: &mut dyn Read) -> Result<(), SnapshotError> {
+        read_state(
+            input,
+            LayerStateMut {
+                counters: &mut self.counters,
+                ring: &mut self.ring,
+                augmented: &mut self.augmented,
+                ready: &mut self.ready,
+                records: &mut self.records,
+                rng: self.warmup.rng_mut(),
+            },
+        )
+    }
+}
+
 pub(super) fn check_len(
     what: &'static str,
     found: usize,
@@ -292,16 +324,16 @@ pub(super) fn check_len(
     }
 }
 
-/// Appends `x` of the step in ring slot `slot`: the state Δ slots back, then the Δ actions
-/// from there on, oldest first.
-fn write_augmented(l: &DelayLayout, ring: &[f32], slot: usize, out: &mut Vec<f32>) {
+/// The ring slot `k` steps after the one Δ steps before `slot`: row `k` of `x` at `slot`.
+fn ring_row<'r>(l: &DelayLayout, ring: &'r [f32], slot: usize, k: usize) -> &'r [f32] {
     let (ring_len, stride) = (l.ring_len(), l.stride());
-    let oldest = (slot + ring_len - l.delay) % ring_len;
-    out.extend_from_slice(&ring[oldest * stride..oldest * stride + l.obs_dim]);
-    for k in 0..l.delay {
-        let s = (oldest + k) % ring_len;
-        out.extend_from_slice(&ring[s * stride + l.obs_dim..s * stride + l.obs_dim + l.act_dim]);
-    }
+    let s = (slot + ring_len - l.delay + k) % ring_len;
+    &ring[s * stride..(s + 1) * stride]
+}
+
+/// Appends `x` of the step in ring slot `slot`.
+fn write_augmented(l: &DelayLayout, ring: &[f32], slot: usize, out: &mut Vec<f32>) {
+    l.push_augmented(|k| ring_row(l, ring, slot, k), out);
 }
 
 /// Puts `s_0` of a new episode at the cursor (advanced past the last episode's `s_T` when
@@ -403,12 +435,6 @@ fn update_augmented(l: &DelayLayout, copy: &mut CopyState<'_>) {
         copy.augmented.fill(0.0);
         return;
     }
-    let (ring_len, stride, obs, act) = (l.ring_len(), l.stride(), l.obs_dim, l.act_dim);
-    let oldest = (c.cursor as usize + ring_len - l.delay) % ring_len;
-    copy.augmented[..obs].copy_from_slice(&copy.ring[oldest * stride..oldest * stride + obs]);
-    for k in 0..l.delay {
-        let s = (oldest + k) % ring_len;
-        copy.augmented[obs + k * act..obs + (k + 1) * act]
-            .copy_from_slice(&copy.ring[s * stride + obs..s * stride + obs + act]);
-    }
+    let (ring, cursor) = (&*copy.ring, c.cursor as usize);
+    l.assemble_augmented(|k| ring_row(l, ring, cursor, k), copy.augmented);
 }

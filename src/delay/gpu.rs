@@ -2,14 +2,18 @@
 //! `wgpu` storage buffers and `shaders/delay.wgsl` updates them, one invocation per copy.
 //! Each step uploads only what the simulator produced (actions, rewards, flags, new states, and
 //! the first states of episodes that restarted); results are read back only on request.
+use std::io::{Read, Write};
+
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use super::cpu::check_len;
+use super::layer::{DelayLayer, LayerState, LayerStateMut, read_state, write_state};
 use super::layout::{CopyCounters, DelayLayout, RecordMeta};
 use super::records::{RecordBatch, StepInput};
 use super::warmup::WarmupFiller;
 use super::{DelayConfig, DelayError};
+use crate::snapshot::SnapshotError;
 
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -60,7 +64,7 @@ pub struct GpuDelayLayer {
     step_pipeline: wgpu::ComputePipeline,
     /// Kept alive for the bind group; never read from the host.
     _params: wgpu::Buffer,
-    _ring: wgpu::Buffer,
+    ring: wgpu::Buffer,
     counters: wgpu::Buffer,
     augmented: wgpu::Buffer,
     record_meta: wgpu::Buffer,
@@ -72,6 +76,11 @@ pub struct GpuDelayLayer {
     input_scratch: Vec<f32>,
     flags_scratch: Vec<u32>,
     warmup: WarmupFiller,
+    /// Host copies of the outputs, read back after every [`DelayLayer`] step.
+    host_counters: Vec<CopyCounters>,
+    host_augmented: Vec<f32>,
+    host_ready: Vec<u32>,
+    host_records: RecordBatch,
 }
 
 impl GpuDelayLayer {
@@ -242,7 +251,7 @@ impl GpuDelayLayer {
             reset_pipeline,
             step_pipeline,
             _params: params_buffer,
-            _ring: ring,
+            ring,
             counters,
             augmented,
             record_meta,
@@ -253,6 +262,10 @@ impl GpuDelayLayer {
             input_scratch: Vec::new(),
             flags_scratch: vec![0; copies],
             warmup: WarmupFiller::new(config.warmup, action_low, action_high, seed),
+            host_counters: vec![CopyCounters::default(); copies],
+            host_augmented: vec![0.0; copies * layout.augmented_dim()],
+            host_ready: vec![0; copies],
+            host_records: RecordBatch::new(layout),
         })
     }
 
@@ -283,8 +296,9 @@ impl GpuDelayLayer {
         self.queue.submit([encoder.finish()]);
     }
 
-    /// Starts every copy's first episode from `observations` (`[N, obs_dim]`).
-    pub fn reset(&mut self, observations: &[f32]) -> Result<(), GpuError> {
+    /// Starts every copy's first episode from `observations` (`[N, obs_dim]`), on the device
+    /// only (no readback).
+    pub fn reset_device(&mut self, observations: &[f32]) -> Result<(), GpuError> {
         let l = self.layout;
         check_len(
             "initial observations",
@@ -298,7 +312,7 @@ impl GpuDelayLayer {
     }
 
     /// Uploads one step of the undelayed batch and runs the step kernel (no readback).
-    pub fn step(&mut self, step: &StepInput<'_>) -> Result<(), GpuError> {
+    pub fn step_device(&mut self, step: &StepInput<'_>) -> Result<(), GpuError> {
         let l = self.layout;
         step.check(&l)?;
         let (obs, act) = (l.obs_dim, l.act_dim);
@@ -401,24 +415,125 @@ impl GpuDelayLayer {
 
     /// The step records completed by the last step, read back from the device.
     pub fn read_records(&self) -> Result<RecordBatch, GpuError> {
+        self.read_records_counted(&self.read_counters()?)
+    }
+
+    /// The records, with the counts of `counters` (read back already).
+    fn read_records_counted(&self, counters: &[CopyCounters]) -> Result<RecordBatch, GpuError> {
         let l = self.layout;
         let mut records = RecordBatch::new(l);
-        records.set_counts(&self.read_counters()?);
+        records.set_counts(counters);
         records.meta = self.read(&self.record_meta, l.copies * l.record_slots())?;
         records.data = self.read(&self.record_data, l.copies * l.record_slots() * l.stride())?;
         Ok(records)
     }
 
-    /// Like [`super::CpuDelayLayer::fill_warmup`], reading the readiness flags back.
-    pub fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), GpuError> {
+    /// Reads the outputs of the last step back into the host copies.
+    fn sync(&mut self) -> Result<(), GpuError> {
+        self.host_counters = self.read_counters()?;
+        self.host_augmented = self.read_augmented()?;
+        for (ready, c) in self.host_ready.iter_mut().zip(&self.host_counters) {
+            *ready = c.ready;
+        }
+        self.host_records = self.read_records_counted(&self.host_counters)?;
+        Ok(())
+    }
+}
+
+fn gpu_error(e: GpuError) -> DelayError {
+    match e {
+        GpuError::Delay(e) => e,
+        e => DelayError::Gpu(e.to_string()),
+    }
+}
+
+impl DelayLayer for GpuDelayLayer {
+    fn layout(&self) -> DelayLayout {
+        self.layout
+    }
+
+    fn reset(&mut self, observations: &[f32]) -> Result<(), DelayError> {
+        self.reset_device(observations).map_err(gpu_error)?;
+        self.sync().map_err(gpu_error)
+    }
+
+    fn step(&mut self, input: &StepInput<'_>) -> Result<(), DelayError> {
+        self.step_device(input).map_err(gpu_error)?;
+        self.sync().map_err(gpu_error)
+    }
+
+    fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), DelayError> {
         check_len(
             "actions",
             actions.len(),
             self.layout.copies * self.layout.act_dim,
         )?;
-        let counters = self.read_counters()?;
         self.warmup
-            .fill(actions, counters.iter().map(|c| c.ready != 0));
+            .fill(actions, self.host_ready.iter().map(|&r| r != 0));
+        Ok(())
+    }
+
+    fn augmented(&self) -> &[f32] {
+        &self.host_augmented
+    }
+
+    fn ready(&self) -> &[u32] {
+        &self.host_ready
+    }
+
+    fn records(&self) -> &RecordBatch {
+        &self.host_records
+    }
+
+    fn save(&self, out: &mut dyn Write) -> Result<(), SnapshotError> {
+        let l = self.layout;
+        let ring: Vec<f32> = self
+            .read(&self.ring, l.copies * l.ring_len() * l.stride())
+            .map_err(|e| std::io::Error::other(e.to_string()))?;
+        write_state(
+            out,
+            LayerState {
+                counters: &self.host_counters,
+                ring: &ring,
+                augmented: &self.host_augmented,
+                ready: &self.host_ready,
+                records: &self.host_records,
+                rng: self.warmup.rng(),
+            },
+        )
+    }
+
+    fn load(&mut self, input: &mut dyn Read) -> Result<(), SnapshotError> {
+        let l = self.layout;
+        let mut ring = vec![0.0f32; l.copies * l.ring_len() * l.stride()];
+        read_state(
+            input,
+            LayerStateMut {
+                counters: &mut self.host_counters,
+                ring: &mut ring,
+                augmented: &mut self.host_augmented,
+                ready: &mut self.host_ready,
+                records: &mut self.host_records,
+                rng: self.warmup.rng_mut(),
+            },
+        )?;
+        for (buffer, bytes) in [
+            (&self.counters, bytemuck::cast_slice(&self.host_counters)),
+            (&self.ring, bytemuck::cast_slice(&ring)),
+            (&self.augmented, bytemuck::cast_slice(&self.host_augmented)),
+            (
+                &self.record_meta,
+                bytemuck::cast_slice(&self.host_records.meta),
+            ),
+            (
+                &self.record_data,
+                bytemuck::cast_slice(&self.host_records.data),
+            ),
+        ] {
+            self.queue.write_buffer(buffer, 0, bytes);
+        }
+        self.wait()
+            .map_err(|e| std::io::Error::other(e.to_string()))?;
         Ok(())
     }
 }

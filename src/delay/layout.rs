@@ -70,6 +70,24 @@ impl DelayLayout {
     pub fn augmented_dim(&self) -> usize {
         self.obs_dim + self.delay * self.act_dim
     }
+
+    /// Writes `x = (s_{τ-Δ}, a_{τ-Δ}, …, a_{τ-1})` into `out` (`augmented_dim` long) from the
+    /// stored steps `row(0..Δ)`, oldest first (ring slots or replay steps of one copy, each
+    /// `[state, action, reward]`): the state of row 0, then the action of every row.
+    pub fn assemble_augmented<'r>(&self, row: impl Fn(usize) -> &'r [f32], out: &mut [f32]) {
+        let (obs, act) = (self.obs_dim, self.act_dim);
+        out[..obs].copy_from_slice(&row(0)[..obs]);
+        for k in 0..self.delay {
+            out[obs + k * act..obs + (k + 1) * act].copy_from_slice(&row(k)[obs..obs + act]);
+        }
+    }
+
+    /// [`DelayLayout::assemble_augmented`], appended to `out`.
+    pub fn push_augmented<'r>(&self, row: impl Fn(usize) -> &'r [f32], out: &mut Vec<f32>) {
+        let start = out.len();
+        out.resize(start + self.augmented_dim(), 0.0);
+        self.assemble_augmented(row, &mut out[start..]);
+    }
     /// Steps kept per copy: transition τ completes at τ + 1 + Δ and needs `s_{τ-Δ}`; an episode
     /// end flushes τ down to T − Δ − 1, so `s_{T-2Δ-1} … s_T` (2Δ + 2 states) must survive the
     /// step that also writes the next episode's `s_0`: 2Δ + 3 slots.

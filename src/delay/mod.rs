@@ -5,21 +5,25 @@
 //!
 //! [`CpuDelayLayer`] is the reference and the fallback; [`GpuDelayLayer`] keeps the same ring
 //! buffers on a `wgpu` device and updates them with `shaders/delay.wgsl`, producing identical
-//! outputs. [`ReplayStore`] keeps records at O(obs + act) floats per step.
+//! outputs; both are a [`DelayLayer`], chosen by [`DelayDevice`]. [`ReplayStore`] keeps records at O(obs + act) floats per step.
 
 mod args;
+mod batch;
 mod config;
 mod cpu;
 mod gpu;
+mod layer;
 mod layout;
 mod records;
 mod replay;
 mod warmup;
 
 pub use args::{DelayArgs, NegativeDelay};
+pub use batch::{BatchError, DelayedBatch};
 pub use config::{DelayConfig, DelayError, MAX_DELAY, WarmupActions, arrival_delay};
-pub use cpu::{CpuDelayLayer, Transitions};
+pub use cpu::{BatchExtras, CpuDelayLayer, Transitions};
 pub use gpu::{GpuDelayLayer, GpuError};
+pub use layer::{DelayDevice, DelayLayer, delay_layer};
 pub use layout::{
     CopyCounters, DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED, RecordMeta,
 };

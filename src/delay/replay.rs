@@ -3,7 +3,7 @@
 //! step costs O(obs + act) floats instead of `2·(obs + Δ·act)`.
 use rand::Rng;
 
-use super::cpu::Transitions;
+use super::cpu::{BatchExtras, Transitions};
 use super::layout::{DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED};
 use super::records::RecordBatch;
 use crate::snapshot::{SnapshotError, read_section, write_section};
@@ -196,33 +196,43 @@ impl ReplayStore {
             && after.tau == m.tau + 1
     }
 
-    /// Rebuilds the transition at the `i`-th oldest step of copy `c` into `out`.
-    fn rebuild(&self, c: usize, i: usize, out: &mut Transitions) {
+    /// Rebuilds the transition at the `i`-th oldest step of copy `c` into `out`, with the
+    /// optional fields in `extras`.
+    fn rebuild(&self, c: usize, i: usize, extras: BatchExtras, out: &mut Transitions) {
         let l = self.layout;
         let (stride, obs, act) = (l.stride(), l.obs_dim, l.act_dim);
         let row = |k: usize| &self.data[self.slot(c, k) * stride..(self.slot(c, k) + 1) * stride];
         let m = self.meta[self.slot(c, i)];
-        let augmented = |end: usize, out: &mut Vec<f32>| {
-            out.extend_from_slice(&row(end - l.delay)[..obs]);
-            for k in end - l.delay..end {
-                out.extend_from_slice(&row(k)[obs..obs + act]);
-            }
-        };
         out.copy.push(c);
         out.episode.push(m.episode);
         out.tau.push(m.tau);
-        augmented(i, &mut out.augmented);
+        l.push_augmented(|k| row(i - l.delay + k), &mut out.augmented);
         out.state.extend_from_slice(&row(i)[..obs]);
         out.action.extend_from_slice(&row(i)[obs..obs + act]);
         out.reward.push(row(i)[stride - 1]);
-        augmented(i + 1, &mut out.next_augmented);
+        l.push_augmented(|k| row(i + 1 - l.delay + k), &mut out.next_augmented);
         out.next_state.extend_from_slice(&row(i + 1)[..obs]);
         out.terminated
             .push(u32::from(m.flags & RECORD_TERMINATED != 0));
+        if extras.intermediate_states {
+            for k in i + 1 - l.delay..=i {
+                out.intermediate_states.extend_from_slice(&row(k)[..obs]);
+            }
+        }
     }
 
     /// `batch` transitions drawn uniformly (with replacement) from the complete ones.
     pub fn sample(&self, batch: usize, rng: &mut impl Rng) -> Result<Transitions, ReplayError> {
+        self.sample_with(batch, rng, BatchExtras::default())
+    }
+
+    /// [`ReplayStore::sample`] with the optional fields in `extras` (the same draws).
+    pub fn sample_with(
+        &self,
+        batch: usize,
+        rng: &mut impl Rng,
+        extras: BatchExtras,
+    ) -> Result<Transitions, ReplayError> {
         let total = self.len();
         if total == 0 {
             return Err(ReplayError::Empty);
@@ -246,7 +256,7 @@ impl ReplayStore {
                 })
                 .expect("g < total");
             if self.is_complete(c, g) {
-                self.rebuild(c, g, &mut out);
+                self.rebuild(c, g, extras, &mut out);
             } else {
                 misses += 1;
                 if misses > 1000 * batch.max(1) {
@@ -263,7 +273,7 @@ impl ReplayStore {
         for c in 0..self.layout.copies {
             for i in 0..self.filled[c] {
                 if self.is_complete(c, i) {
-                    self.rebuild(c, i, &mut out);
+                    self.rebuild(c, i, BatchExtras::default(), &mut out);
                 }
             }
         }

@@ -16,8 +16,8 @@ pub use losses::{
     temperature_loss,
 };
 pub use nets::{
-    ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, PolicySample, QNetwork,
-    Temperature, TwinQ, squashed_sample, squashed_samples_k,
+    ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, Mlp, MlpConfig, PolicySample,
+    QNetwork, Temperature, TwinQ, squashed_sample, squashed_samples_k,
 };
 pub use noise::Noise;
 pub use tensors::{column, matrix, to_vec};

@@ -215,3 +215,54 @@ impl Temperature {
         f64::from(self.log_alpha.val().inner().exp().into_scalar::<f32>())
     }
 }
+
+/// A multilayer perceptron: `Linear` layers of the given widths with ReLU between them and a
+/// linear output, for networks an algorithm needs beyond the SAC family's (e.g. a dynamics
+/// model). `MlpConfig::new(obs + act, &[256, 256], obs).init(device)`.
+#[derive(Debug, Clone)]
+pub struct MlpConfig {
+    pub input: usize,
+    pub hidden: Vec<usize>,
+    pub output: usize,
+}
+
+impl MlpConfig {
+    pub fn new(input: usize, hidden: &[usize], output: usize) -> MlpConfig {
+        MlpConfig {
+            input,
+            hidden: hidden.to_vec(),
+            output,
+        }
+    }
+
+    /// The network, its layers initialised in order from burn's generator on `device`.
+    pub fn init(&self, device: &Device) -> Mlp {
+        let widths: Vec<usize> = std::iter::once(self.input)
+            .chain(self.hidden.iter().copied())
+            .chain(std::iter::once(self.output))
+            .collect();
+        Mlp {
+            layers: widths
+                .windows(2)
+                .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+                .collect(),
+        }
+    }
+}
+
+/// See [`MlpConfig`].
+#[derive(Module, Debug)]
+pub struct Mlp {
+    pub layers: Vec<Linear>,
+}
+
+impl Mlp {
+    /// `[B, input]` → `[B, output]`.
+    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        let last = self.layers.len() - 1;
+        self.layers.iter().enumerate().fold(x, |x, (i, layer)| {
+            let y = layer.forward(x);
+            if i < last { relu(y) } else { y }
+        })
+    }
+}

@@ -271,6 +271,10 @@ impl BatchedEnv {
     pub fn task(&self) -> TaskName {
         self.model.task.name
     }
+    /// The task's compiled model and constants.
+    pub fn model(&self) -> &TaskModel {
+        &self.model
+    }
     pub fn len(&self) -> usize {
         self.copies.len()
     }

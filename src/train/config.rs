@@ -2,8 +2,8 @@
 //! reads, and what the flags override.
 use serde::{Deserialize, Serialize};
 
-use crate::algos::{Algo, Hyper, Lifting};
-use crate::delay::{DEFAULT_CAPACITY, DelayConfig, DelayError};
+use crate::algos::{AlgoError, AlgoSettings, algorithm};
+use crate::delay::{DEFAULT_CAPACITY, DelayConfig, DelayDevice, DelayError};
 use crate::learn::LearnDevice;
 use crate::tasks::TaskName;
 
@@ -11,7 +11,6 @@ use crate::tasks::TaskName;
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
     pub task: TaskName,
-    pub algo: Algo,
     pub delay: DelayConfig,
     /// Environment steps in total (all copies together).
     pub steps: u64,
@@ -33,9 +32,10 @@ pub struct TrainConfig {
     /// Gradient updates between rows of `train.csv`.
     pub log_every: u64,
     pub device: LearnDevice,
-    pub hyper: Hyper,
-    /// D2HPG's lifting loss (ignored by the other algorithms).
-    pub lifting: Lifting,
+    /// Where the delay layer runs (training and evaluation copies).
+    pub delay_device: DelayDevice,
+    /// The algorithm and its configuration (`[algo]`, with `name`).
+    pub algo: AlgoSettings,
 }
 
 impl Default for TrainConfig {
@@ -43,7 +43,6 @@ impl Default for TrainConfig {
     fn default() -> TrainConfig {
         TrainConfig {
             task: TaskName::InvertedPendulum,
-            algo: Algo::Sac,
             delay: DelayConfig::default(),
             steps: 20_000,
             seed: 0,
@@ -58,8 +57,8 @@ impl Default for TrainConfig {
             checkpoint_every: 5_000,
             log_every: 1_000,
             device: LearnDevice::Cpu,
-            hyper: Hyper::default(),
-            lifting: Lifting::default(),
+            delay_device: DelayDevice::Cpu,
+            algo: AlgoSettings::default(),
         }
     }
 }
@@ -74,10 +73,10 @@ pub enum ConfigError {
         accepted: &'static str,
         value: String,
     },
-    #[error(
-        "sac is the delay-free reference and runs with Δ = 0; use augmented-sac, naive-sac (or a D2HPG variant) under a delay"
-    )]
-    SacWithDelay,
+    #[error(transparent)]
+    Algo(#[from] AlgoError),
+    #[error(transparent)]
+    NegativeDelay(#[from] crate::delay::NegativeDelay),
     #[error("cannot read config file {path}: {message}")]
     Read { path: String, message: String },
 }
@@ -100,21 +99,29 @@ fn check(
 }
 
 impl TrainConfig {
-    /// Reads a TOML config (any subset of the fields; the rest default).
+    /// Reads a TOML config (any subset of the fields; the rest default). Files written before
+    /// the `[algo]` table (`algo = "NAME"` with `[hyper]` and `[lifting]`) are read too.
     pub fn from_toml_file(path: &std::path::Path) -> Result<TrainConfig, ConfigError> {
         let read_error = |message: String| ConfigError::Read {
             path: path.display().to_string(),
             message,
         };
         let text = std::fs::read_to_string(path).map_err(|e| read_error(e.to_string()))?;
-        toml::from_str(&text).map_err(|e| read_error(e.to_string()))
+        let mut table: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| read_error(e.to_string()))?;
+        fold_legacy_algo_tables(&mut table)?;
+        toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| read_error(e.to_string()))
     }
 
-    /// Checks every field and returns the total delay Δ.
+    /// Checks every field and returns the total delay Δ (the algorithm's fields are checked
+    /// when they are set).
     pub fn validate(&self) -> Result<usize, ConfigError> {
         let delay = self.delay.total_delay()?;
-        if self.algo == Algo::Sac && delay > 0 {
-            return Err(ConfigError::SacWithDelay);
+        if self.algo.info().undelayed_only && delay > 0 {
+            return Err(AlgoError::UndelayedOnly(self.algo.name()).into());
         }
         check(self.steps > 0, "steps", "at least 1", self.steps)?;
         check(self.envs > 0, "envs", "at least 1", self.envs)?;
@@ -155,40 +162,46 @@ impl TrainConfig {
             "at least 1",
             self.log_every,
         )?;
-        let h = &self.hyper;
-        check((0.0..1.0).contains(&h.gamma), "gamma", "in [0, 1)", h.gamma)?;
-        check(h.tau > 0.0 && h.tau <= 1.0, "tau", "in (0, 1]", h.tau)?;
-        check(
-            h.learning_rate > 0.0 && h.learning_rate.is_finite(),
-            "learning_rate",
-            "a positive number",
-            h.learning_rate,
-        )?;
-        check(
-            h.adam_epsilon > 0.0,
-            "adam_epsilon",
-            "a positive number",
-            h.adam_epsilon,
-        )?;
-        check(
-            h.initial_alpha > 0.0 && h.initial_alpha.is_finite(),
-            "initial_alpha",
-            "a positive number",
-            h.initial_alpha,
-        )?;
-        let l = &self.lifting;
-        check(
-            l.weight >= 0.0 && l.weight.is_finite(),
-            "lifting weight",
-            "a finite number ≥ 0",
-            l.weight,
-        )?;
-        check(
-            l.samples >= 2,
-            "lifting samples",
-            "at least 2 (standard deviations need two samples)",
-            l.samples,
-        )?;
         Ok(delay)
     }
+}
+
+/// Moves the `[hyper]` and `[lifting]` tables of an older `config.toml` (beside `algo = "NAME"`,
+/// or no algo for sac) into `[algo]`, keeping the fields the algorithm has (older files wrote
+/// `[lifting]` for every algorithm).
+fn fold_legacy_algo_tables(table: &mut toml::Table) -> Result<(), ConfigError> {
+    if !table.contains_key("hyper") && !table.contains_key("lifting") {
+        return Ok(());
+    }
+    let name = match table.get("algo") {
+        None => "sac".to_string(),
+        Some(toml::Value::String(name)) => name.clone(),
+        Some(_) => {
+            return Err(ConfigError::Invalid {
+                what: "[hyper] and [lifting]",
+                accepted: "absent beside an [algo] table (their fields belong in [algo])",
+                value: "given with [algo]".into(),
+            });
+        }
+    };
+    let mut fields = toml::Table::new();
+    if let Some(toml::Value::Table(hyper)) = table.remove("hyper") {
+        fields.extend(hyper);
+    }
+    if let Some(toml::Value::Table(lifting)) = table.remove("lifting") {
+        for (old, new) in [("weight", "lifting_weight"), ("samples", "lifting_samples")] {
+            if let Some(value) = lifting.get(old) {
+                fields.insert(new.into(), value.clone());
+            }
+        }
+    }
+    let known: Vec<&str> = algorithm(&name)?
+        .field_docs()
+        .iter()
+        .map(|d| d.name)
+        .collect();
+    fields.retain(|k, _| known.iter().any(|name| *name == k));
+    fields.insert("name".into(), toml::Value::String(name));
+    table.insert("algo".into(), toml::Value::Table(fields));
+    Ok(())
 }

@@ -8,7 +8,6 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 use super::{TrainConfig, TrainError, io_error};
-use crate::algos::{Algo, Lifting};
 
 /// One group of runs (the same task, algorithm, delay and lifting settings; several seeds).
 #[derive(Debug, Clone, Serialize)]
@@ -62,9 +61,13 @@ pub fn summarize_runs(runs: &[PathBuf]) -> Result<Vec<CurveSummary>, TrainError>
         let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
         let delay = config.validate()?;
         let mut label = format!("{} {} Δ={delay}", config.task, config.algo);
-        if matches!(config.algo, Algo::D2hpg | Algo::D2hpgNaive) {
-            let Lifting { weight, samples } = config.lifting;
-            label += &format!(" λ={weight} K={samples}");
+        for (field, symbol) in config.algo.info().label_fields {
+            let value = match config.algo.fields().get(*field) {
+                Some(toml::Value::Float(v)) => v.to_string(),
+                Some(other) => other.to_string(),
+                None => continue,
+            };
+            label += &format!(" {symbol}={value}");
         }
         groups
             .entry(label)

@@ -2,8 +2,8 @@
 //! return is the sum of the true rewards of all its steps, the warm-up steps before the first
 //! observation arrives included, up to termination or the time limit.
 use crate::algos::{ActMode, Agent};
-use crate::delay::{CpuDelayLayer, DelayConfig, StepInput};
-use crate::sim::{BatchConfig, BatchedEnv};
+use crate::delay::{DelayConfig, DelayDevice, DelayedBatch};
+use crate::sim::BatchConfig;
 use crate::tasks::TaskName;
 
 use super::TrainError;
@@ -27,65 +27,53 @@ pub struct EvalResult {
     pub episodes: usize,
 }
 
-/// Plays one episode on each of `episodes` fresh copies (seeded by `seed`) under `delay`.
+/// Plays one episode on each of `episodes` fresh copies (seeded by `seed`) under `delay`,
+/// the delay layer on `device`.
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate(
     agent: &mut dyn Agent,
     policy: EvalPolicy,
     task: TaskName,
     delay: &DelayConfig,
+    device: DelayDevice,
     episodes: usize,
     threads: usize,
     seed: u64,
 ) -> Result<EvalResult, TrainError> {
-    let mut env = BatchedEnv::new(&BatchConfig {
-        task,
-        envs: episodes,
-        threads,
+    let mut batch = DelayedBatch::new(
+        &BatchConfig {
+            task,
+            envs: episodes,
+            threads,
+            seed,
+            actuator_noise: delay.actuator_noise,
+        },
+        delay,
+        device,
         seed,
-        actuator_noise: delay.actuator_noise,
-    })?;
-    let (low, high) = (
-        env.action_bounds().0.to_vec(),
-        env.action_bounds().1.to_vec(),
-    );
-    let (obs_dim, act_dim) = (env.obs_dim(), env.act_dim());
-    let mut layer = CpuDelayLayer::new(delay, episodes, obs_dim, &low, &high, seed)?;
-    layer.reset(env.observations())?;
-    let aug = layer.layout().augmented_dim();
+    )?;
+    let act_dim = batch.env().act_dim();
     let mut finished = vec![false; episodes];
     let mut returns = vec![0.0f64; episodes];
     let mut lengths = vec![0u32; episodes];
     while finished.iter().any(|f| !f) {
-        let acting: Vec<usize> = (0..episodes)
-            .filter(|&i| !finished[i] && layer.ready()[i] == 1)
-            .collect();
         let mut actions = vec![0.0f32; episodes * act_dim];
-        if !acting.is_empty() {
-            let inputs: Vec<f32> = acting
-                .iter()
-                .flat_map(|&i| &layer.augmented()[i * aug..(i + 1) * aug])
-                .copied()
-                .collect();
-            let chosen = match policy {
-                EvalPolicy::Regular => agent.act(&inputs, acting.len(), ActMode::Deterministic),
-                EvalPolicy::DelayFree => {
-                    agent.act_delay_free(&inputs, acting.len()).ok_or_else(|| {
-                        TrainError::Config(super::ConfigError::Invalid {
-                            what: "the evaluated policy",
-                            accepted: "a delay-free policy, which only the D2HPG variants learn",
-                            value: "delay-free".into(),
-                        })
-                    })?
-                }
-            };
-            for (k, &i) in acting.iter().enumerate() {
-                actions[i * act_dim..(i + 1) * act_dim]
-                    .copy_from_slice(&chosen[k * act_dim..(k + 1) * act_dim]);
-            }
-        }
-        layer.fill_warmup(&mut actions)?;
-        env.step(&actions)?;
-        layer.step(&StepInput::from_env(&env, &actions))?;
+        batch.choose_actions(
+            &mut actions,
+            |i| !finished[i],
+            |inputs, rows| match policy {
+                EvalPolicy::Regular => Ok(agent.act(inputs, rows, ActMode::Deterministic)),
+                EvalPolicy::DelayFree => agent.act_delay_free(inputs, rows).ok_or_else(|| {
+                    TrainError::Config(super::ConfigError::Invalid {
+                        what: "the evaluated policy",
+                        accepted: "a delay-free policy, which only the D2HPG variants learn",
+                        value: "delay-free".into(),
+                    })
+                }),
+            },
+        )?;
+        batch.step(&actions)?;
+        let env = batch.env();
         for i in 0..episodes {
             if !finished[i] {
                 returns[i] += f64::from(env.rewards()[i]);

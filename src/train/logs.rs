@@ -55,3 +55,29 @@ pub fn truncate_after(path: &Path, step: u64) -> Result<(), TrainError> {
     out.sync_all().map_err(io_error(&tmp))?;
     std::fs::rename(&tmp, path).map_err(io_error(path))
 }
+
+/// `train.csv`'s statistic cells: each statistic's mean over the updates that reported it,
+/// empty where none did (so a statistic an update skipped never shifts into another column).
+pub fn stat_means(sums: &[f64], counts: &[u64]) -> Vec<String> {
+    sums.iter()
+        .zip(counts)
+        .map(|(sum, &count)| {
+            if count == 0 {
+                String::new()
+            } else {
+                format!("{:.6}", sum / count as f64)
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_statistic_no_update_reported_is_an_empty_cell() {
+        assert_eq!(
+            super::stat_means(&[3.0, 0.0, 1.0], &[2, 0, 4]),
+            ["1.500000", "", "0.250000"]
+        );
+    }
+}

@@ -2,6 +2,7 @@
 //! gradient update per environment step, periodic evaluation on separate delayed copies,
 //! CSV logs, and atomic checkpoints that a killed run resumes from.
 
+mod args;
 mod checkpoint;
 mod config;
 mod curves;
@@ -9,10 +10,11 @@ mod eval;
 mod logs;
 mod run;
 
+pub use args::{TrainArgs, TrainPlan};
 pub use config::{ConfigError, TrainConfig};
 pub use curves::{CurveSummary, plot_curves, summarize_runs};
 pub use eval::{EvalResult, evaluate};
-pub use run::{Start, TrainSummary, evaluate_saved, train};
+pub use run::{Start, TrainSummary, evaluate_saved, learner_pool, train};
 
 use crate::delay::{DelayError, ReplayError};
 use crate::learn::LearnError;
@@ -28,6 +30,8 @@ pub enum TrainError {
     #[error(transparent)]
     Delay(#[from] DelayError),
     #[error(transparent)]
+    Batch(#[from] crate::delay::BatchError),
+    #[error(transparent)]
     Replay(#[from] ReplayError),
     #[error(transparent)]
     Learn(#[from] LearnError),
@@ -39,6 +43,10 @@ pub enum TrainError {
     OutputExists(String),
     #[error("{0} holds no checkpoint to resume from (nothing was saved before the run stopped)")]
     NoCheckpoint(String),
+    #[error(transparent)]
+    Algo(#[from] crate::algos::AlgoError),
+    #[error("the agent reported a statistic `{0}` it did not declare in stat_names")]
+    UndeclaredStatistic(&'static str),
 }
 
 /// Wraps an I/O error with the path it concerns.

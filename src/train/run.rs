@@ -9,12 +9,13 @@ use serde::{Deserialize, Serialize};
 
 use super::checkpoint::{self, read_json, write_binary, write_json};
 use super::eval::{EvalPolicy, EvalResult, evaluate};
-use super::logs::{CsvLog, truncate_after};
+use super::logs::{CsvLog, stat_means, truncate_after};
 use super::{ConfigError, TrainConfig, TrainError, io_error};
-use crate::algos::{ActMode, Agent, AgentSpec, build_agent};
-use crate::delay::{CpuDelayLayer, DelayConfig, DelayLayout, ReplayStore, StepInput};
+use crate::algos::{ActMode, Agent, AgentSpec, UpdateContext};
+use crate::delay::{DelayConfig, DelayedBatch, ReplayError, ReplayStore};
 use crate::learn::Devices;
-use crate::sim::{BatchConfig, BatchSnapshot, BatchedEnv};
+use crate::seeds;
+use crate::sim::{BatchConfig, BatchSnapshot};
 
 /// Whether `train` starts a new run or continues one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,8 +48,12 @@ struct LoopState {
     /// Draws the uniform random actions of the warm-up phase.
     warmup_rng: ChaCha8Rng,
     last_eval: Option<EvalResult>,
-    /// Sums of the agent's statistics since the last `train.csv` row, and their count.
+    /// Per statistic the agent declared: the sum of its values since the last `train.csv`
+    /// row, and how many updates reported it.
     stat_sums: Vec<f64>,
+    #[serde(default)]
+    stat_counts: Vec<u64>,
+    /// Updates since the last `train.csv` row.
     stat_count: u64,
     /// Environment steps and wall seconds at the last `train.csv` row.
     logged_steps: u64,
@@ -75,10 +80,12 @@ const TRAIN_HEADER: [&str; 5] = [
 struct Trainer {
     config: TrainConfig,
     run: PathBuf,
-    env: BatchedEnv,
-    layer: CpuDelayLayer,
+    /// The training copies and their delay layer.
+    batch: DelayedBatch,
     replay: ReplayStore,
     agent: Box<dyn Agent>,
+    /// The threads the agent's learners run on (its declared learner count).
+    learner_pool: rayon::ThreadPool,
     state: LoopState,
     /// Opened when the loop starts, after a resume has cut the files back.
     evals: Option<CsvLog>,
@@ -86,16 +93,18 @@ struct Trainer {
     stat_names: Vec<&'static str>,
 }
 
-/// The agent's sizes for a task under a delay.
-fn agent_spec(env: &BatchedEnv, delay: usize) -> AgentSpec {
-    let (low, high) = env.action_bounds();
-    AgentSpec {
-        obs_dim: env.obs_dim(),
-        act_dim: env.act_dim(),
-        delay,
-        action_low: low.to_vec(),
-        action_high: high.to_vec(),
-    }
+/// A pool of `threads` threads for the learners: burn's CPU backend splits the products of a
+/// single learner across rayon's threads, which costs more than it gains at these sizes, so an
+/// agent gets as many threads as it has learners to update side by side.
+pub fn learner_pool(threads: usize) -> Result<rayon::ThreadPool, TrainError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("dhrl-learner-{i}"))
+        .build()
+        .map_err(|e| TrainError::Io {
+            path: "learner threads".into(),
+            message: e.to_string(),
+        })
 }
 
 /// Trains as configured, writing into `run`; with [`Start::Resume`], continues the run saved
@@ -148,39 +157,25 @@ pub fn train(
 impl Trainer {
     fn new(config: TrainConfig, run: &Path) -> Result<Trainer, TrainError> {
         let delay = config.validate()?;
-        let env = BatchedEnv::new(&BatchConfig {
-            task: config.task,
-            envs: config.envs,
-            threads: config.threads,
-            seed: config.seed,
-            actuator_noise: config.delay.actuator_noise,
-        })?;
-        let spec = agent_spec(&env, delay);
-        let mut layer = CpuDelayLayer::new(
+        let batch = DelayedBatch::new(
+            &BatchConfig {
+                task: config.task,
+                envs: config.envs,
+                threads: config.threads,
+                seed: config.seed,
+                actuator_noise: config.delay.actuator_noise,
+            },
             &config.delay,
-            config.envs,
-            spec.obs_dim,
-            &spec.action_low,
-            &spec.action_high,
-            config.seed ^ 0xDE1A,
+            config.delay_device,
+            seeds::delay_layer(config.seed),
         )?;
-        layer.reset(env.observations())?;
-        let layout = DelayLayout {
-            copies: config.envs,
-            obs_dim: spec.obs_dim,
-            act_dim: spec.act_dim,
-            delay,
-        };
+        let spec = AgentSpec::for_model(batch.env().model(), delay);
+        let layout = batch.layout();
         let replay = ReplayStore::new(layout, config.replay_capacity)?;
         let devices = Devices::new(config.device)?;
-        let agent = build_agent(
-            config.algo,
-            &spec,
-            &config.hyper,
-            &config.lifting,
-            &devices,
-            config.seed,
-        );
+        let agent = config.algo.build(&spec, &devices, config.seed)?;
+        let stat_names = agent.stat_names();
+        let learner_pool = learner_pool(config.algo.info().learner_threads)?;
         let state = LoopState {
             env_steps: 0,
             updates: 0,
@@ -188,10 +183,11 @@ impl Trainer {
             evals_done: 0,
             checkpoints_done: 0,
             wall_seconds: 0.0,
-            sample_rng: ChaCha8Rng::seed_from_u64(config.seed ^ 0x5A3B),
-            warmup_rng: ChaCha8Rng::seed_from_u64(config.seed ^ 0x3A3),
+            sample_rng: ChaCha8Rng::seed_from_u64(seeds::replay_sampling(config.seed)),
+            warmup_rng: ChaCha8Rng::seed_from_u64(seeds::warmup_phase(config.seed)),
             last_eval: None,
-            stat_sums: Vec::new(),
+            stat_sums: vec![0.0; stat_names.len()],
+            stat_counts: vec![0; stat_names.len()],
             stat_count: 0,
             logged_steps: 0,
             logged_updates: 0,
@@ -200,14 +196,14 @@ impl Trainer {
         Ok(Trainer {
             config,
             run: run.to_path_buf(),
-            env,
-            layer,
+            batch,
             replay,
+            learner_pool,
             agent,
             state,
             evals: None,
             train_log: None,
-            stat_names: Vec::new(),
+            stat_names,
         })
     }
 
@@ -216,9 +212,18 @@ impl Trainer {
         let dir = checkpoint::latest(&self.run)
             .ok_or_else(|| TrainError::NoCheckpoint(self.run.display().to_string()))?;
         self.state = read_json(&dir.join("state.json"))?;
+        // Checkpoints written before per-statistic counts: every statistic on every update.
+        let n = self.stat_names.len();
+        if self.state.stat_counts.len() != n {
+            self.state.stat_counts = vec![self.state.stat_count; n];
+        }
+        if self.state.stat_sums.len() != n {
+            self.state.stat_sums = vec![0.0; n];
+        }
         let env: BatchSnapshot = read_json(&dir.join("env.json"))?;
-        self.env.restore(&env)?;
-        self.layer
+        self.batch.env_mut().restore(&env)?;
+        self.batch
+            .layer_mut()
             .load(&mut checkpoint::open_binary(&dir.join("delay.bin"))?)?;
         self.replay
             .load(&mut checkpoint::open_binary(&dir.join("replay.bin"))?)?;
@@ -231,8 +236,10 @@ impl Trainer {
     fn save_checkpoint(&mut self) -> Result<(), TrainError> {
         let dir = checkpoint::begin(&self.run)?;
         write_json(&dir.join("state.json"), &self.state)?;
-        write_json(&dir.join("env.json"), &self.env.snapshot())?;
-        write_binary(&dir.join("delay.bin"), |out| Ok(self.layer.save(out)?))?;
+        write_json(&dir.join("env.json"), &self.batch.env().snapshot())?;
+        write_binary(&dir.join("delay.bin"), |out| {
+            Ok(self.batch.layer().save(out)?)
+        })?;
         write_binary(&dir.join("replay.bin"), |out| Ok(self.replay.save(out)?))?;
         self.agent.save(&dir.join("agent"))?;
         checkpoint::commit(&self.run)
@@ -241,10 +248,12 @@ impl Trainer {
     /// Actions for every copy: uniform random during the warm-up phase, the policy's samples
     /// for copies whose augmented state exists, the delay layer's warm-up actions for the rest.
     fn choose_actions(&mut self) -> Result<Vec<f32>, TrainError> {
-        let (n, act) = (self.env.len(), self.env.act_dim());
+        let env = self.batch.env();
+        let (n, act) = (env.len(), env.act_dim());
         let mut actions = vec![0.0f32; n * act];
-        if self.state.env_steps < self.config.warmup_steps {
-            let (low, high) = self.env.action_bounds();
+        let warming_up = self.state.env_steps < self.config.warmup_steps;
+        if warming_up {
+            let (low, high) = env.action_bounds();
             for row in actions.chunks_mut(act) {
                 for (j, a) in row.iter_mut().enumerate() {
                     *a = self
@@ -253,46 +262,43 @@ impl Trainer {
                         .random_range(low[j] as f32..=high[j] as f32);
                 }
             }
-        } else {
-            let aug = self.layer.layout().augmented_dim();
-            let ready: Vec<usize> = (0..n).filter(|&i| self.layer.ready()[i] == 1).collect();
-            if !ready.is_empty() {
-                let inputs: Vec<f32> = ready
-                    .iter()
-                    .flat_map(|&i| &self.layer.augmented()[i * aug..(i + 1) * aug])
-                    .copied()
-                    .collect();
-                let chosen = self.agent.act(&inputs, ready.len(), ActMode::Explore);
-                for (k, &i) in ready.iter().enumerate() {
-                    actions[i * act..(i + 1) * act]
-                        .copy_from_slice(&chosen[k * act..(k + 1) * act]);
-                }
-            }
         }
-        self.layer.fill_warmup(&mut actions)?;
+        let (agent, pool) = (&mut self.agent, &self.learner_pool);
+        self.batch.choose_actions(
+            &mut actions,
+            |_| !warming_up,
+            |inputs, rows| {
+                Ok::<_, TrainError>(pool.install(|| agent.act(inputs, rows, ActMode::Explore)))
+            },
+        )?;
         Ok(actions)
     }
 
     fn update(&mut self) -> Result<(), TrainError> {
-        let batch = match self
-            .replay
-            .sample(self.config.batch_size, &mut self.state.sample_rng)
-        {
-            Ok(batch) => batch,
+        let mut ctx = UpdateContext::replay(
+            &self.replay,
+            &mut self.state.sample_rng,
+            self.agent.batch_extras(),
+            self.config.batch_size,
+            self.state.env_steps,
+            self.state.updates,
+        );
+        let agent = &mut self.agent;
+        let stats = match self.learner_pool.install(|| agent.update(&mut ctx)) {
+            Ok(stats) => stats,
             // Nothing complete yet (e.g. delay longer than the warm-up): learn later.
-            Err(crate::delay::ReplayError::Empty) => return Ok(()),
+            Err(ReplayError::Empty) => return Ok(()),
             Err(e) => return Err(e.into()),
         };
-        let stats = self.agent.update(&batch);
         self.state.updates += 1;
-        if self.stat_names.is_empty() {
-            self.stat_names = stats.iter().map(|(name, _)| *name).collect();
-        }
-        if self.state.stat_sums.len() != stats.len() {
-            self.state.stat_sums = vec![0.0; stats.len()];
-        }
-        for (sum, (_, value)) in self.state.stat_sums.iter_mut().zip(&stats) {
-            *sum += value;
+        for (name, value) in stats {
+            let k = self
+                .stat_names
+                .iter()
+                .position(|n| *n == name)
+                .ok_or(TrainError::UndeclaredStatistic(name))?;
+            self.state.stat_sums[k] += value;
+            self.state.stat_counts[k] += 1;
         }
         self.state.stat_count += 1;
         if self.state.updates % self.config.log_every == 0 {
@@ -319,29 +325,30 @@ impl Trainer {
             format!("{:.1}", (s.env_steps - s.logged_steps) as f64 / seconds),
             format!("{:.1}", (s.updates - s.logged_updates) as f64 / seconds),
         ];
-        row.extend(
-            s.stat_sums
-                .iter()
-                .map(|sum| format!("{:.6}", sum / s.stat_count.max(1) as f64)),
-        );
+        row.extend(stat_means(&s.stat_sums, &s.stat_counts));
         (s.logged_steps, s.logged_updates, s.logged_wall) =
             (s.env_steps, s.updates, s.wall_seconds);
         s.stat_sums.iter_mut().for_each(|v| *v = 0.0);
+        s.stat_counts.iter_mut().for_each(|v| *v = 0);
         s.stat_count = 0;
         self.train_log.as_mut().expect("opened above").append(&row)
     }
 
     fn evaluate_now(&mut self) -> Result<EvalResult, TrainError> {
-        let seed = self.config.seed ^ 0xE7A1 ^ (self.state.evals_done << 20);
-        let result = evaluate(
-            self.agent.as_mut(),
-            EvalPolicy::Regular,
-            self.config.task,
-            &self.config.delay,
-            self.config.eval_episodes,
-            self.config.threads,
-            seed,
-        )?;
+        let seed = seeds::evaluation(self.config.seed, self.state.evals_done);
+        let (agent, config) = (&mut self.agent, &self.config);
+        let result = self.learner_pool.install(|| {
+            evaluate(
+                agent.as_mut(),
+                EvalPolicy::Regular,
+                config.task,
+                &config.delay,
+                config.delay_device,
+                config.eval_episodes,
+                config.threads,
+                seed,
+            )
+        })?;
         let evals = match &mut self.evals {
             Some(log) => log,
             None => self
@@ -376,9 +383,8 @@ impl Trainer {
         let wall_at_start = self.state.wall_seconds;
         while self.state.env_steps < c.steps {
             let actions = self.choose_actions()?;
-            self.env.step(&actions)?;
-            self.layer.step(&StepInput::from_env(&self.env, &actions))?;
-            self.replay.push(self.layer.records())?;
+            self.batch.step(&actions)?;
+            self.replay.push(self.batch.layer().records())?;
             self.state.env_steps += c.envs as u64;
             self.state.wall_seconds = wall_at_start + session_start.elapsed().as_secs_f64();
             if self.state.env_steps >= c.warmup_steps {
@@ -441,7 +447,15 @@ pub fn evaluate_saved(
         (false, delay) => delay.unwrap_or(config.delay),
     };
     let total = eval_delay.total_delay()?;
-    if !delay_free_policy && total != trained_delay && config.algo.acts_on_augmented_state() {
+    let info = config.algo.info();
+    if delay_free_policy && !info.delay_free_policy {
+        return Err(TrainError::Config(ConfigError::Invalid {
+            what: "--delay-free-policy",
+            accepted: "a run of an algorithm that learns a delay-free policy (d2hpg, d2hpg-naive)",
+            value: config.algo.to_string(),
+        }));
+    }
+    if !delay_free_policy && total != trained_delay && info.acts_on_augmented_state {
         return Err(TrainError::Config(ConfigError::Invalid {
             what: "the evaluation delay",
             accepted: "the total delay the policy was trained with, since its input x_t grows with Δ",
@@ -450,42 +464,25 @@ pub fn evaluate_saved(
     }
     let dir = checkpoint::latest(run)
         .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
-    let env = BatchedEnv::new(&BatchConfig {
-        task: config.task,
-        envs: 1,
-        threads: 1,
-        seed,
-        actuator_noise: 0.0,
-    })?;
     let devices = Devices::new(config.device)?;
-    let mut agent = build_agent(
-        config.algo,
-        &agent_spec(&env, trained_delay),
-        &config.hyper,
-        &config.lifting,
-        &devices,
-        config.seed,
-    );
+    let spec = AgentSpec::for_task(config.task, trained_delay)?;
+    let mut agent = config.algo.build(&spec, &devices, config.seed)?;
     agent.load(&dir.join("agent"))?;
     let policy = if delay_free_policy {
         EvalPolicy::DelayFree
     } else {
         EvalPolicy::Regular
     };
-    if delay_free_policy && agent.act_delay_free(&vec![0.0; env.obs_dim()], 1).is_none() {
-        return Err(TrainError::Config(ConfigError::Invalid {
-            what: "--delay-free-policy",
-            accepted: "a run of d2hpg or d2hpg-naive (the algorithms that learn a delay-free policy)",
-            value: config.algo.to_string(),
-        }));
-    }
-    evaluate(
-        agent.as_mut(),
-        policy,
-        config.task,
-        &eval_delay,
-        episodes,
-        config.threads,
-        seed,
-    )
+    learner_pool(info.learner_threads)?.install(|| {
+        evaluate(
+            agent.as_mut(),
+            policy,
+            config.task,
+            &eval_delay,
+            config.delay_device,
+            episodes,
+            config.threads,
+            seed,
+        )
+    })
 }

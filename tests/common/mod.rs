@@ -4,6 +4,32 @@
 use std::path::Path;
 use std::process::Command;
 
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::prelude::Tensor;
+use dhrl::algos::{Agent, Stats, UpdateContext};
+use dhrl::delay::Transitions;
+use dhrl::learn::to_vec;
+
+/// Every float parameter of a module, flattened, in declaration order.
+pub fn parameters<M: Module>(module: &M) -> Vec<f32> {
+    struct Collect(Vec<f32>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.0.extend(to_vec(param.val()));
+        }
+    }
+    let mut all = Collect(Vec::new());
+    module.visit(&mut all);
+    all.0
+}
+
+/// One update of `agent` from exactly `batch`.
+pub fn update(agent: &mut dyn Agent, batch: &Transitions) -> Stats {
+    agent
+        .update(&mut UpdateContext::fixed(batch, 0, 0))
+        .expect("a fixed batch is never empty")
+}
+
 /// Runs `dhrl train ARGS --out RUN`, failing the test with its stderr if it fails.
 pub fn train(args: &[&str], run: &Path) {
     let out = Command::new(env!("CARGO_BIN_EXE_dhrl"))
@@ -42,4 +68,36 @@ pub fn best_return(run: &Path) -> (f64, String) {
         .map(|v| v.parse::<f64>().unwrap())
         .fold(f64::MIN, f64::max);
     (best, std::fs::read_to_string(evals).unwrap())
+}
+
+/// Trains `algo` on InvertedPendulum under a fixed delay for the learning tests (8,000
+/// steps, batch 64, seed 2, four evaluations of 5 episodes); returns the best evaluation.
+pub fn learn_delayed_pendulum(algo: &str, delay: usize) -> (f64, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let delay = delay.to_string();
+    train(
+        &[
+            "--task",
+            "inverted-pendulum",
+            "--algo",
+            algo,
+            "--delay",
+            &delay,
+            "--steps",
+            "8000",
+            "--warmup-steps",
+            "500",
+            "--eval-every",
+            "2000",
+            "--eval-episodes",
+            "5",
+            "--batch-size",
+            "64",
+            "--seed",
+            "2",
+        ],
+        &run,
+    );
+    best_return(&run)
 }

@@ -1,0 +1,108 @@
+//! The one delayed-batch path: a batched simulator and a delay layer (CPU or GPU) stepped
+//! together, with warm-up actions for copies that have observed nothing yet and a policy
+//! acting on the augmented states of the ready ones. Training and evaluation both run it.
+use super::{
+    DelayConfig, DelayDevice, DelayError, DelayLayer, DelayLayout, StepInput, delay_layer,
+};
+use crate::sim::{BatchConfig, BatchedEnv, SimError};
+
+#[derive(Debug, thiserror::Error)]
+pub enum BatchError {
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error(transparent)]
+    Delay(#[from] DelayError),
+}
+
+/// `N` copies of a task as the delayed agent lives in them.
+pub struct DelayedBatch {
+    env: BatchedEnv,
+    layer: Box<dyn DelayLayer>,
+}
+
+impl DelayedBatch {
+    /// The copies of `batch` under `delay`, the layer on `device` (its warm-up actions and
+    /// random delays drawn from `layer_seed`), every copy at the start of its first episode.
+    pub fn new(
+        batch: &BatchConfig,
+        delay: &DelayConfig,
+        device: DelayDevice,
+        layer_seed: u64,
+    ) -> Result<DelayedBatch, BatchError> {
+        let env = BatchedEnv::new(&BatchConfig {
+            actuator_noise: delay.actuator_noise,
+            ..batch.clone()
+        })?;
+        let (low, high) = env.action_bounds();
+        let mut layer = delay_layer(
+            device,
+            delay,
+            env.len(),
+            env.obs_dim(),
+            low,
+            high,
+            layer_seed,
+        )?;
+        layer.reset(env.observations())?;
+        Ok(DelayedBatch { env, layer })
+    }
+
+    pub fn env(&self) -> &BatchedEnv {
+        &self.env
+    }
+
+    pub fn env_mut(&mut self) -> &mut BatchedEnv {
+        &mut self.env
+    }
+
+    pub fn layer(&self) -> &dyn DelayLayer {
+        self.layer.as_ref()
+    }
+
+    pub fn layer_mut(&mut self) -> &mut dyn DelayLayer {
+        self.layer.as_mut()
+    }
+
+    pub fn layout(&self) -> DelayLayout {
+        self.layer.layout()
+    }
+
+    /// Fills `actions` (`[N, act_dim]`): `policy` chooses for the ready copies that `acting`
+    /// selects — it gets their augmented states `[rows, obs + Δ·act]` and the row count — the
+    /// copies still in warm-up get warm-up actions, and the other rows keep what they hold.
+    pub fn choose_actions<E>(
+        &mut self,
+        actions: &mut [f32],
+        acting: impl Fn(usize) -> bool,
+        policy: impl FnOnce(&[f32], usize) -> Result<Vec<f32>, E>,
+    ) -> Result<(), E>
+    where
+        E: From<DelayError>,
+    {
+        let (aug, act) = (self.layout().augmented_dim(), self.layout().act_dim);
+        let (ready, augmented) = (self.layer.ready(), self.layer.augmented());
+        let rows: Vec<usize> = (0..ready.len())
+            .filter(|&i| ready[i] == 1 && acting(i))
+            .collect();
+        if !rows.is_empty() {
+            let inputs: Vec<f32> = rows
+                .iter()
+                .flat_map(|&i| &augmented[i * aug..(i + 1) * aug])
+                .copied()
+                .collect();
+            let chosen = policy(&inputs, rows.len())?;
+            for (k, &i) in rows.iter().enumerate() {
+                actions[i * act..(i + 1) * act].copy_from_slice(&chosen[k * act..(k + 1) * act]);
+            }
+        }
+        self.layer.fill_warmup(actions)?;
+        Ok(())
+    }
+
+    /// Steps the simulator with `actions`, then the delay layer with what it returned.
+    pub fn step(&mut self, actions: &[f32]) -> Result<(), BatchError> {
+        self.env.step(actions)?;
+        self.layer.step(&StepInput::from_env(&self.env, actions))?;
+        Ok(())
+    }
+}

@@ -1,0 +1,180 @@
+//! `dhrl train`'s arguments, and how they resolve into a run: defaults, then `--config`, then
+//! flags (`--set FIELD=VALUE` for any field of the algorithm); `--resume` takes the run's own
+//! `config.toml` and only `--steps`.
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::{ConfigError, Start, TrainConfig, TrainError};
+use crate::algos::{AlgoError, AlgoSettings, names};
+use crate::delay::{DelayArgs, DelayDevice};
+use crate::learn::LearnDevice;
+use crate::tasks::TaskName;
+
+fn algo_names() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(names())
+}
+
+#[derive(Args, Debug, Clone, Default)]
+pub struct TrainArgs {
+    #[arg(long, value_enum)]
+    pub task: Option<TaskName>,
+    /// The algorithm (`--help-config` lists its fields).
+    #[arg(long, value_parser = algo_names())]
+    pub algo: Option<String>,
+    /// Set a field of the algorithm's configuration (repeatable), e.g. --set lifting_weight=10.
+    #[arg(long = "set", value_name = "FIELD=VALUE")]
+    pub set: Vec<String>,
+    /// Print the fields of the algorithm's configuration, with their defaults, and exit.
+    #[arg(long)]
+    pub help_config: bool,
+    #[command(flatten)]
+    pub delay: DelayArgs,
+    /// Environment steps in total.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Copies collecting in parallel (1: the paper's protocol, one update per step).
+    #[arg(long)]
+    pub envs: Option<usize>,
+    /// Simulation threads.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Uniform random steps before learning starts.
+    #[arg(long)]
+    pub warmup_steps: Option<u64>,
+    #[arg(long)]
+    pub eval_every: Option<u64>,
+    #[arg(long)]
+    pub eval_episodes: Option<usize>,
+    #[arg(long)]
+    pub checkpoint_every: Option<u64>,
+    #[arg(long)]
+    pub batch_size: Option<usize>,
+    /// Initial entropy temperature α (--set initial_alpha=…).
+    #[arg(long)]
+    pub alpha: Option<f64>,
+    /// Keep α fixed instead of learning it (--set autotune_alpha=false).
+    #[arg(long)]
+    pub fixed_alpha: bool,
+    /// D2HPG's lifting weight λ (--set lifting_weight=…).
+    #[arg(long)]
+    pub lifting_weight: Option<f64>,
+    /// D2HPG's lifting samples K per state, ≥ 2 (--set lifting_samples=…).
+    #[arg(long)]
+    pub lifting_samples: Option<usize>,
+    /// Where the learners run.
+    #[arg(long, value_enum)]
+    pub device: Option<LearnDevice>,
+    /// Where the delay layer runs: cpu (the reference), or gpu (the WGSL kernels on any
+    /// Vulkan adapter, read back every step; the same results).
+    #[arg(long, value_enum)]
+    pub delay_device: Option<DelayDevice>,
+    /// TOML file with any fields of config.toml; flags override it.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Run folder (must not exist; default runs/<task>-<algo>-d<delay>-s<seed>-<time>).
+    #[arg(long, value_name = "DIR", conflicts_with = "resume")]
+    pub out: Option<PathBuf>,
+    /// Continue the run in DIR from its last checkpoint (with --steps to extend it).
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
+}
+
+/// A run to start or continue.
+#[derive(Debug, Clone)]
+pub struct TrainPlan {
+    pub run: PathBuf,
+    pub start: Start,
+    /// For [`Start::Resume`], only `steps` is used (the run's own config.toml holds the rest).
+    pub config: TrainConfig,
+}
+
+impl TrainArgs {
+    /// The algorithm configuration the flags ask for, over `base` (the config file's).
+    fn algo(&self, base: AlgoSettings) -> Result<AlgoSettings, AlgoError> {
+        let mut algo = match &self.algo {
+            Some(name) if name != base.name() => base.switch_to(name)?,
+            _ => base,
+        };
+        let flags = [
+            self.alpha.map(|v| format!("initial_alpha={v:?}")),
+            self.fixed_alpha.then(|| "autotune_alpha=false".to_string()),
+            self.lifting_weight.map(|v| format!("lifting_weight={v:?}")),
+            self.lifting_samples.map(|v| format!("lifting_samples={v}")),
+        ];
+        for assignment in flags.into_iter().flatten().chain(self.set.iter().cloned()) {
+            algo.set(&assignment)?;
+        }
+        Ok(algo)
+    }
+
+    /// The configuration of a new run: defaults, then `--config`, then flags.
+    pub fn config(&self) -> Result<TrainConfig, TrainError> {
+        let mut c = match &self.config {
+            Some(path) => TrainConfig::from_toml_file(path)?,
+            None => TrainConfig::default(),
+        };
+        c.task = self.task.unwrap_or(c.task);
+        c.algo = self.algo(c.algo)?;
+        c.delay = self.delay.apply(c.delay).map_err(ConfigError::from)?;
+        c.steps = self.steps.unwrap_or(c.steps);
+        c.seed = self.seed.unwrap_or(c.seed);
+        c.envs = self.envs.unwrap_or(c.envs);
+        c.threads = self.threads.unwrap_or(c.threads);
+        c.warmup_steps = self.warmup_steps.unwrap_or(c.warmup_steps);
+        c.eval_every = self.eval_every.unwrap_or(c.eval_every);
+        c.eval_episodes = self.eval_episodes.unwrap_or(c.eval_episodes);
+        c.checkpoint_every = self.checkpoint_every.unwrap_or(c.checkpoint_every);
+        c.batch_size = self.batch_size.unwrap_or(c.batch_size);
+        c.device = self.device.unwrap_or(c.device);
+        c.delay_device = self.delay_device.unwrap_or(c.delay_device);
+        Ok(c)
+    }
+
+    /// Where and how to train: a new run (checked, in `--out` or a fresh folder under
+    /// `runs/`), or `--resume DIR` with at most `--steps` beside it.
+    pub fn plan(&self) -> Result<TrainPlan, TrainError> {
+        if let Some(dir) = &self.resume {
+            let given = self.task.is_some()
+                || self.algo.is_some()
+                || !self.set.is_empty()
+                || self.delay.any()
+                || self.config.is_some()
+                || self.seed.is_some();
+            if given {
+                return Err(ConfigError::Invalid {
+                    what: "--resume",
+                    accepted: "given alone or with --steps (the run continues with its own config.toml)",
+                    value: format!("given with other options for {}", dir.display()),
+                }
+                .into());
+            }
+            return Ok(TrainPlan {
+                run: dir.clone(),
+                start: Start::Resume,
+                config: TrainConfig {
+                    steps: self.steps.unwrap_or(0),
+                    ..TrainConfig::default()
+                },
+            });
+        }
+        let config = self.config()?;
+        let delay = config.validate()?;
+        let run = self.out.clone().unwrap_or_else(|| {
+            let stamp = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs());
+            PathBuf::from(format!(
+                "runs/{}-{}-d{delay}-s{}-{stamp}",
+                config.task, config.algo, config.seed
+            ))
+        });
+        Ok(TrainPlan {
+            run,
+            start: Start::Fresh,
+            config,
+        })
+    }
+}
