@@ -1,7 +1,7 @@
 //! The CPU delay layer alone at HalfCheetah sizes, fed with synthetic steps (a twentieth of
 //! the copies finishing each step), for Δ = 5, 10, 20.
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use dhrl::delay::{CpuDelayLayer, DelayConfig, StepInput};
+use dhrl::delay::{CpuDelayLayer, DelayConfig, DelayLayer, StepInput};
 
 const ENVS: usize = 4096;
 const OBS: usize = 17;

@@ -177,7 +177,7 @@ pub fn bench_delay(
     steps: usize,
     seed: u64,
 ) -> Result<Vec<DelayBenchRow>, BenchError> {
-    use crate::delay::{CpuDelayLayer, DelayConfig, GpuDelayLayer, StepInput};
+    use crate::delay::{CpuDelayLayer, DelayConfig, DelayLayer, GpuDelayLayer, StepInput};
     let (mut batch, actions) = noiseless_batch(task, envs, threads, seed)?;
     let (low, high) = (
         batch.action_bounds().0.to_vec(),

@@ -8,7 +8,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::delay::{CpuDelayLayer, DelayConfig, DelayError, StepInput, arrival_delay};
+use crate::delay::{CpuDelayLayer, DelayConfig, DelayError, DelayLayer, StepInput, arrival_delay};
 use crate::delay::{RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED};
 use crate::sim::{Env, SimError, TaskModel, actuator_noise, check_vector, executed_action};
 use crate::tasks::TaskName;

@@ -129,6 +129,12 @@ pub enum Regular {
     LiftingOnly,
 }
 
+/// `train.csv` columns: the delay-free learner's, the regular BPQL learner's (`d2hpg` only),
+/// and the unweighted lifting loss.
+const FREE_STATS: [&str; 3] = ["free_critic_loss", "free_actor_loss", "free_alpha"];
+const REGULAR_STATS: [&str; 3] = ["critic_loss", "actor_loss", "alpha"];
+const LIFTING_STAT: &str = "lifting_loss";
+
 pub struct D2hpg {
     spec: AgentSpec,
     regular_kind: Regular,
@@ -184,13 +190,13 @@ impl Agent for D2hpg {
 
     fn stat_names(&self) -> Vec<&'static str> {
         let regular: &[&'static str] = match self.regular_kind {
-            Regular::Bpql => &["critic_loss", "actor_loss", "alpha"],
+            Regular::Bpql => &REGULAR_STATS,
             Regular::LiftingOnly => &[],
         };
-        let free = ["free_critic_loss", "free_actor_loss", "free_alpha"];
-        free.iter()
+        FREE_STATS
+            .iter()
             .chain(regular)
-            .chain(&["lifting_loss"])
+            .chain(&[LIFTING_STAT])
             .copied()
             .collect()
     }
@@ -260,19 +266,18 @@ impl Agent for D2hpg {
             || delay_free.update_policy(&free_batch, free_distribution, None),
         );
 
-        let mut stats = vec![
-            ("free_critic_loss", free_critic_loss),
-            ("free_actor_loss", free_actor_loss),
-            ("free_alpha", free_alpha),
-        ];
+        let mut stats: Stats = FREE_STATS
+            .into_iter()
+            .zip([free_critic_loss, free_actor_loss, free_alpha])
+            .collect();
         if let (Some(critic_loss), Some(actor_loss)) = (critic_loss, actor_loss) {
-            stats.extend([
-                ("critic_loss", critic_loss),
-                ("actor_loss", actor_loss),
-                ("alpha", alpha),
-            ]);
+            stats.extend(
+                REGULAR_STATS
+                    .into_iter()
+                    .zip([critic_loss, actor_loss, alpha]),
+            );
         }
-        stats.push(("lifting_loss", lifting_value));
+        stats.push((LIFTING_STAT, lifting_value));
         Ok(stats)
     }
 

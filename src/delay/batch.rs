@@ -21,18 +21,16 @@ pub struct DelayedBatch {
 }
 
 impl DelayedBatch {
-    /// The copies of `batch` under `delay`, the layer on `device` (its warm-up actions and
-    /// random delays drawn from `layer_seed`), every copy at the start of its first episode.
+    /// The copies of `batch` (its `actuator_noise` is `delay`'s σ) under `delay`, the layer on
+    /// `device` (its warm-up actions and random delays drawn from `layer_seed`), every copy at
+    /// the start of its first episode.
     pub fn new(
         batch: &BatchConfig,
         delay: &DelayConfig,
         device: DelayDevice,
         layer_seed: u64,
     ) -> Result<DelayedBatch, BatchError> {
-        let env = BatchedEnv::new(&BatchConfig {
-            actuator_noise: delay.actuator_noise,
-            ..batch.clone()
-        })?;
+        let env = BatchedEnv::new(batch)?;
         let (low, high) = env.action_bounds();
         let mut layer = delay_layer(
             device,

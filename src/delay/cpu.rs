@@ -102,12 +102,46 @@ impl CpuDelayLayer {
         })
     }
 
-    pub fn layout(&self) -> DelayLayout {
+    pub fn counters(&self) -> &[CopyCounters] {
+        &self.counters
+    }
+
+    /// The transitions completed by the last step, written out in full (`x` verbatim).
+    pub fn transitions(&self) -> Transitions {
+        let l = self.layout;
+        let (ring_len, stride) = (l.ring_len(), l.stride());
+        let mut out = Transitions::default();
+        for record in self.records.iter() {
+            if record.is_final_state() || (record.meta.tau as usize) < l.delay {
+                continue;
+            }
+            let ring =
+                &self.ring[record.copy * ring_len * stride..(record.copy + 1) * ring_len * stride];
+            let slot = record.meta.slot as usize;
+            let next = (slot + 1) % ring_len;
+            out.copy.push(record.copy);
+            out.episode.push(record.meta.episode);
+            out.tau.push(record.meta.tau);
+            write_augmented(&l, ring, slot, &mut out.augmented);
+            out.state.extend_from_slice(record.state);
+            out.action.extend_from_slice(record.action);
+            out.reward.push(record.reward);
+            write_augmented(&l, ring, next, &mut out.next_augmented);
+            out.next_state
+                .extend_from_slice(&ring[next * stride..next * stride + l.obs_dim]);
+            out.terminated
+                .push(u32::from(record.meta.flags & RECORD_TERMINATED != 0));
+        }
+        out
+    }
+}
+
+impl DelayLayer for CpuDelayLayer {
+    fn layout(&self) -> DelayLayout {
         self.layout
     }
 
-    /// Starts every copy's first episode from `observations` (`[N, obs_dim]`, the `s_0`s).
-    pub fn reset(&mut self, observations: &[f32]) -> Result<(), DelayError> {
+    fn reset(&mut self, observations: &[f32]) -> Result<(), DelayError> {
         let l = self.layout;
         check_len(
             "initial observations",
@@ -132,8 +166,7 @@ impl CpuDelayLayer {
         Ok(())
     }
 
-    /// Records one step of the undelayed batch and updates augmented states and records.
-    pub fn step(&mut self, input: &StepInput<'_>) -> Result<(), DelayError> {
+    fn step(&mut self, input: &StepInput<'_>) -> Result<(), DelayError> {
         let l = self.layout;
         input.check(&l)?;
         let (obs, act) = (l.obs_dim, l.act_dim);
@@ -196,9 +229,7 @@ impl CpuDelayLayer {
         Ok(())
     }
 
-    /// Overwrites the rows of `actions` (`[N, act_dim]`) of copies still in warm-up (`t < Δ`,
-    /// nothing observed yet) with warm-up actions: uniform random in the bounds, or zeros.
-    pub fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), DelayError> {
+    fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), DelayError> {
         check_len(
             "actions",
             actions.len(),
@@ -209,77 +240,18 @@ impl CpuDelayLayer {
         Ok(())
     }
 
-    /// `[N, obs + Δ·act]`: `x_t` of every copy (zeros where not ready).
-    pub fn augmented(&self) -> &[f32] {
-        &self.augmented
-    }
-
-    /// `[N]`: 1 where `x_t` exists and the policy acts, 0 during warm-up.
-    pub fn ready(&self) -> &[u32] {
-        &self.ready
-    }
-
-    pub fn counters(&self) -> &[CopyCounters] {
-        &self.counters
-    }
-
-    /// The step records completed by the last step.
-    pub fn records(&self) -> &RecordBatch {
-        &self.records
-    }
-
-    /// The transitions completed by the last step, written out in full (`x` verbatim).
-    pub fn transitions(&self) -> Transitions {
-        let l = self.layout;
-        let (ring_len, stride) = (l.ring_len(), l.stride());
-        let mut out = Transitions::default();
-        for record in self.records.iter() {
-            if record.is_final_state() || (record.meta.tau as usize) < l.delay {
-                continue;
-            }
-            let ring =
-                &self.ring[record.copy * ring_len * stride..(record.copy + 1) * ring_len * stride];
-            let slot = record.meta.slot as usize;
-            let next = (slot + 1) % ring_len;
-            out.copy.push(record.copy);
-            out.episode.push(record.meta.episode);
-            out.tau.push(record.meta.tau);
-            write_augmented(&l, ring, slot, &mut out.augmented);
-            out.state.extend_from_slice(record.state);
-            out.action.extend_from_slice(record.action);
-            out.reward.push(record.reward);
-            write_augmented(&l, ring, next, &mut out.next_augmented);
-            out.next_state
-                .extend_from_slice(&ring[next * stride..next * stride + l.obs_dim]);
-            out.terminated
-                .push(u32::from(record.meta.flags & RECORD_TERMINATED != 0));
-        }
-        out
-    }
-}
-
-impl DelayLayer for CpuDelayLayer {
-    fn layout(&self) -> DelayLayout {
-        self.layout
-    }
-    fn reset(&mut self, observations: &[f32]) -> Result<(), DelayError> {
-        CpuDelayLayer::reset(self, observations)
-    }
-    fn step(&mut self, input: &StepInput<'_>) -> Result<(), DelayError> {
-        CpuDelayLayer::step(self, input)
-    }
-    fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), DelayError> {
-        CpuDelayLayer::fill_warmup(self, actions)
-    }
     fn augmented(&self) -> &[f32] {
         &self.augmented
     }
+
     fn ready(&self) -> &[u32] {
         &self.ready
     }
+
     fn records(&self) -> &RecordBatch {
         &self.records
     }
+
     fn save(&self, out: &mut dyn Write) -> Result<(), SnapshotError> {
         write_state(
             out,

@@ -53,7 +53,9 @@ struct LoopState {
     stat_sums: Vec<f64>,
     #[serde(default)]
     stat_counts: Vec<u64>,
-    /// Updates since the last `train.csv` row.
+    /// Read from checkpoints written before `stat_counts` only (their updates since the last
+    /// row, every statistic reported on each).
+    #[serde(default, skip_serializing)]
     stat_count: u64,
     /// Environment steps and wall seconds at the last `train.csv` row.
     logged_steps: u64,
@@ -300,7 +302,6 @@ impl Trainer {
             self.state.stat_sums[k] += value;
             self.state.stat_counts[k] += 1;
         }
-        self.state.stat_count += 1;
         if self.state.updates % self.config.log_every == 0 {
             self.write_train_row()?;
         }
@@ -330,7 +331,6 @@ impl Trainer {
             (s.env_steps, s.updates, s.wall_seconds);
         s.stat_sums.iter_mut().for_each(|v| *v = 0.0);
         s.stat_counts.iter_mut().for_each(|v| *v = 0);
-        s.stat_count = 0;
         self.train_log.as_mut().expect("opened above").append(&row)
     }
 
