@@ -1,17 +1,19 @@
 #!/usr/bin/env bash
 # The runs behind the README's D2HPG comparison and lifting-settings tables, and their plots.
 #
-#   scripts/comparison.sh SET [--jobs N] [--seeds "0 1 2"] [--runs DIR] [--dry-run]
+#   scripts/comparison.sh SET [--jobs N] [--seeds "0 1 2"] [--algos "A B"] [--runs DIR] [--dry-run]
 #
-# SET: ip-delay5    InvertedPendulum, Δ = 5, 100k steps: d2hpg, bpql, augmented-sac, naive-sac
-#      hc-delay10   HalfCheetah, Δ = 10, 200k steps: d2hpg, bpql, augmented-sac
+# SET: ip-delay5    InvertedPendulum, Δ = 5, 100k steps: d2hpg, bpql, vdpo, delayed-sac,
+#                   augmented-sac, naive-sac
+#      hc-delay10   HalfCheetah, Δ = 10, 200k steps: d2hpg, bpql, vdpo, delayed-sac, augmented-sac
 #      lifting-ip   d2hpg on InvertedPendulum, Δ = 10, 25k steps: λ ∈ {0.1, 1, 10, 100} at K = 10,
 #                   K ∈ {2, 5, 20} at λ = 1, and λ = 10 with K = 2
 #      lifting-hc   the same settings on HalfCheetah, Δ = 10, 50k steps
 #
 # Every run learns on one thread (RAYON_NUM_THREADS=1), N runs at a time (default: the number of
 # cores). A run folder that already exists is continued with `dhrl train --resume`, so the script
-# can be stopped and started again; a finished run is left as it is. The plot goes to
+# can be stopped and started again; a finished run is left as it is. --algos keeps only the
+# named algorithms of the set (ip-delay5 and hc-delay10). The plot goes to
 # DIR/SET.svg (DIR defaults to runs/), with the final-return table printed beside it.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -26,12 +28,14 @@ case $set_name in
 esac
 jobs=$(nproc)
 seeds="0 1 2"
+algos=""
 runs=runs
 dry_run=false
 while [[ $# -gt 0 ]]; do
     case $1 in
         --jobs) jobs=$2; shift 2 ;;
         --seeds) seeds=$2; shift 2 ;;
+        --algos) algos=$2; shift 2 ;;
         --runs) runs=$2; shift 2 ;;
         --dry-run) dry_run=true; shift ;;
         *) echo "comparison.sh: unknown option $1" >&2; usage ;;
@@ -44,11 +48,11 @@ plan() {
     for seed in $seeds; do
         case $set_name in
             ip-delay5)
-                for algo in d2hpg bpql augmented-sac naive-sac; do
+                for algo in ${algos:-d2hpg bpql vdpo delayed-sac augmented-sac naive-sac}; do
                     echo "ip-$algo-d5-s$seed --task inverted-pendulum --algo $algo --delay 5 --warmup zeros --steps 100000 --seed $seed"
                 done ;;
             hc-delay10)
-                for algo in d2hpg bpql augmented-sac; do
+                for algo in ${algos:-d2hpg bpql vdpo delayed-sac augmented-sac}; do
                     echo "hc-$algo-d10-s$seed --task half-cheetah --algo $algo --delay 10 --steps 200000 --seed $seed"
                 done ;;
             lifting-ip | lifting-hc)

@@ -273,9 +273,11 @@ pub fn bench_update(
     let threads = threads.unwrap_or(algo.info().learner_threads);
     let pool = crate::train::learner_pool(threads)?;
     let seconds = pool.install(|| {
+        // One environment step per update, as training's default: work an agent schedules by
+        // environment steps (VDPO's cloning stage) runs on its schedule and is in the mean.
         let mut update = |k: usize| {
             agent
-                .update(&mut UpdateContext::fixed(&batch, 0, k as u64))
+                .update(&mut UpdateContext::fixed(&batch, k as u64, k as u64))
                 .map(|_| ())
         };
         update(0)?; // warm-up: allocations, lazy initialisation

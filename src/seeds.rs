@@ -35,3 +35,16 @@ pub fn delay_free_learner(seed: u64) -> u64 {
 pub fn lifting_noise(seed: u64) -> u64 {
     seed ^ 0x11F7
 }
+
+/// A stream an algorithm names itself (e.g. `"vdpo/belief"`), for the streams of one
+/// algorithm's file: the name's FNV-1a hash mixed into the seed by SplitMix64's finaliser,
+/// so that different names give unrelated streams.
+pub fn named(seed: u64, stream: &str) -> u64 {
+    let hash = stream.bytes().fold(0xCBF2_9CE4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01B3)
+    });
+    let mut z = (seed ^ hash).wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}

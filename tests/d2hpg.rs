@@ -308,7 +308,7 @@ fn d2hpg_naive_moves_its_regular_policy_toward_the_delay_free_one() {
 #[test]
 fn bpql_and_d2hpg_learn_where_broken_variants_do_not() {
     for algo in ["bpql", "d2hpg"] {
-        let (best, text) = common::learn_delayed_pendulum(algo, 2);
+        let (best, text) = common::learn_delayed_pendulum(algo, 2, &[]);
         assert!(
             best > 40.0,
             "{algo}: best evaluation return {best}, below the bar of 40 that separates it from \

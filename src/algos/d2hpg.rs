@@ -71,6 +71,7 @@ const D2HPG_INFO: AlgoInfo = AlgoInfo {
     acts_on_augmented_state: true,
     delay_free_policy: true,
     undelayed_only: false,
+    delayed_only: false,
     learner_threads: 2,
     label_fields: &[("λ", "lifting_weight"), ("K", "lifting_samples")],
 };

@@ -10,10 +10,12 @@ mod augmented_sac;
 mod bpql;
 mod context;
 mod d2hpg;
+mod delayed_sac;
 mod naive_sac;
 mod registry;
 mod sac;
 mod settings;
+mod vdpo;
 
 use std::path::Path;
 
@@ -24,7 +26,9 @@ pub use registry::{
     AlgoConfig, AlgoError, AlgoInfo, Algorithm, ConfigFields, FieldDoc, Registered, check,
     toml_value,
 };
-pub use sac::{Config as SacConfig, InputView, SacAgent, SacBatch, SacLearner, SacStats};
+pub use sac::{
+    Config as SacConfig, InputView, LearningRates, SacAgent, SacBatch, SacLearner, SacStats,
+};
 pub use settings::AlgoSettings;
 
 use crate::delay::{BatchExtras, ReplayError, Transitions};
@@ -37,6 +41,8 @@ pub static ALGORITHMS: &[&dyn Algorithm] = &[
     &Registered::<sac::Config>::new(),
     &Registered::<naive_sac::Config>::new(),
     &Registered::<augmented_sac::Config>::new(),
+    &Registered::<delayed_sac::Config>::new(),
+    &Registered::<vdpo::Config>::new(),
     &Registered::<bpql::Config>::new(),
     &Registered::<d2hpg::NaiveConfig>::new(),
     &Registered::<d2hpg::Config>::new(),
@@ -128,8 +134,8 @@ pub trait Agent: Send {
     fn load(&mut self, dir: &Path) -> Result<(), LearnError>;
 }
 
-/// `n` random transitions at `spec`'s sizes (values uniform in [−1, 1), every fifth one
-/// terminal): what update benchmarks and tests feed the learners, whose cost does not depend on
+/// `n` random transitions at `spec`'s sizes, with their intermediate states (values uniform
+/// in [−1, 1), every fifth one terminal): what update benchmarks and tests feed the learners, whose cost does not depend on
 /// the values.
 pub fn random_batch(spec: &AgentSpec, n: usize, seed: u64) -> Transitions {
     use rand::{Rng, SeedableRng};
@@ -151,6 +157,6 @@ pub fn random_batch(spec: &AgentSpec, n: usize, seed: u64) -> Transitions {
         next_augmented: random(n * aug),
         next_state: random(n * obs),
         terminated: (0..n).map(|i| u32::from(i % 5 == 0)).collect(),
-        intermediate_states: Vec::new(),
+        intermediate_states: random(n * spec.delay * obs),
     }
 }

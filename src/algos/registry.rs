@@ -23,6 +23,8 @@ pub struct AlgoInfo {
     pub delay_free_policy: bool,
     /// Whether the algorithm is a delay-free reference that runs with Δ = 0 only.
     pub undelayed_only: bool,
+    /// Whether the algorithm needs a delay Δ ≥ 1 (its policy reads the Δ pending actions).
+    pub delayed_only: bool,
     /// Learners updated side by side (rayon threads an update can use to advantage).
     pub learner_threads: usize,
     /// Fields shown in plot labels, with the symbol they are shown as (e.g. `λ`).
@@ -42,6 +44,7 @@ impl AlgoInfo {
             acts_on_augmented_state,
             delay_free_policy: false,
             undelayed_only: false,
+            delayed_only: false,
             learner_threads: 1,
             label_fields: &[],
         }
@@ -84,6 +87,10 @@ pub enum AlgoError {
         "{0} is a delay-free reference and runs with Δ = 0; use augmented-sac, naive-sac, bpql or a D2HPG variant under a delay"
     )]
     UndelayedOnly(&'static str),
+    #[error(
+        "{0} reads the Δ pending actions of the augmented state and needs a delay of at least 1; use sac for Δ = 0"
+    )]
+    DelayedOnly(&'static str),
 }
 
 /// Checks one field: `Ok` when `ok`, else [`AlgoError::Invalid`].

@@ -148,14 +148,14 @@ pub(crate) fn adam(hyper: &Config) -> ModuleOptimizer {
         .init()
 }
 
-fn save_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
+pub(crate) fn save_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
     LearnError::Save {
         what: what.display().to_string(),
         message: e.to_string(),
     }
 }
 
-fn load_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
+pub(crate) fn load_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
     LearnError::Load {
         what: what.display().to_string(),
         message: e.to_string(),
@@ -176,6 +176,15 @@ pub struct SacBatch {
     pub done: Tensor<2>,
 }
 
+/// Adam learning rates of a [`SacLearner`]'s parts (all `learning_rate` unless an algorithm
+/// sets them apart, as VDPO's reference SAC does).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LearningRates {
+    pub critic: f64,
+    pub actor: f64,
+    pub temperature: f64,
+}
+
 /// SAC with a policy `π(a | actor input)` and twin critics `Q(critic input, a)`.
 pub struct SacLearner {
     pub actor: GaussianPolicy,
@@ -188,6 +197,7 @@ pub struct SacLearner {
     temperature_opt: ModuleOptimizer,
     pub scale: ActionScale,
     hyper: Config,
+    pub rates: LearningRates,
     /// `H̄ = −dim(A)`.
     target_entropy: f64,
     pub devices: Devices,
@@ -221,6 +231,11 @@ impl SacLearner {
             temperature_opt: adam(hyper),
             scale: ActionScale::new(&spec.action_low, &spec.action_high, &devices.plain),
             hyper: hyper.clone(),
+            rates: LearningRates {
+                critic: hyper.learning_rate,
+                actor: hyper.learning_rate,
+                temperature: hyper.learning_rate,
+            },
             target_entropy: -(spec.act_dim as f64),
             devices: devices.clone(),
             noise: Noise::new(crate::seeds::learner_noise(seed)),
@@ -289,7 +304,7 @@ impl SacLearner {
         let grads = GradientsParams::from_grads(loss.backward(), &self.critic);
         self.critic = self
             .critic_opt
-            .step(self.hyper.learning_rate, self.critic.clone(), grads);
+            .step(self.rates.critic, self.critic.clone(), grads);
         value
     }
 
@@ -300,10 +315,23 @@ impl SacLearner {
         self.actor.distribution(batch.actor_input.clone())
     }
 
+    /// [`SacLearner::update_actor_and_temperature`], then the targets. Returns the actor's SAC
+    /// loss and the temperature's loss.
+    pub fn update_policy(
+        &mut self,
+        batch: &SacBatch,
+        distribution: (Tensor<2>, Tensor<2>),
+        extra: Option<Tensor<1>>,
+    ) -> (f64, f64) {
+        let losses = self.update_actor_and_temperature(batch, distribution, extra);
+        self.update_targets();
+        losses
+    }
+
     /// Actor (Eq. 7): `α log π(a|x) − min Q(s, a)`, `a ~ π(·|x)` from `distribution`, critics
     /// held fixed, plus `extra` (a loss on the same distribution) in the same step; then the
-    /// temperature and the targets. Returns the actor's SAC loss and the temperature's loss.
-    pub fn update_policy(
+    /// temperature. Returns the actor's SAC loss and the temperature's loss.
+    pub fn update_actor_and_temperature(
         &mut self,
         batch: &SacBatch,
         distribution: (Tensor<2>, Tensor<2>),
@@ -325,7 +353,6 @@ impl SacLearner {
             None => loss,
         });
         let alpha_loss = self.update_temperature(mean_log_prob);
-        self.update_targets();
         (actor_loss, alpha_loss)
     }
 
@@ -334,7 +361,7 @@ impl SacLearner {
         let grads = GradientsParams::from_grads(loss.backward(), &self.actor);
         self.actor = self
             .actor_opt
-            .step(self.hyper.learning_rate, self.actor.clone(), grads);
+            .step(self.rates.actor, self.actor.clone(), grads);
     }
 
     /// Temperature (Eq. 18): `−α(log π + H̄)`, toward the target entropy; returns the loss
@@ -352,12 +379,12 @@ impl SacLearner {
         let grads = GradientsParams::from_grads(loss.backward(), &self.temperature);
         self.temperature =
             self.temperature_opt
-                .step(self.hyper.learning_rate, self.temperature.clone(), grads);
+                .step(self.rates.temperature, self.temperature.clone(), grads);
         value
     }
 
     /// Targets: `θ̄ ← τθ + (1 − τ)θ̄`.
-    fn update_targets(&mut self) {
+    pub fn update_targets(&mut self) {
         self.target = polyak(self.target.clone(), &self.critic, self.hyper.tau);
     }
 

@@ -123,6 +123,9 @@ impl TrainConfig {
         if self.algo.info().undelayed_only && delay > 0 {
             return Err(AlgoError::UndelayedOnly(self.algo.name()).into());
         }
+        if self.algo.info().delayed_only && delay == 0 {
+            return Err(AlgoError::DelayedOnly(self.algo.name()).into());
+        }
         check(self.steps > 0, "steps", "at least 1", self.steps)?;
         check(self.envs > 0, "envs", "at least 1", self.envs)?;
         check(self.threads > 0, "threads", "at least 1", self.threads)?;

@@ -71,33 +71,33 @@ pub fn best_return(run: &Path) -> (f64, String) {
 }
 
 /// Trains `algo` on InvertedPendulum under a fixed delay for the learning tests (8,000
-/// steps, batch 64, seed 2, four evaluations of 5 episodes); returns the best evaluation.
-pub fn learn_delayed_pendulum(algo: &str, delay: usize) -> (f64, String) {
+/// steps, batch 64, seed 2, four evaluations of 5 episodes), with `extra` flags; returns the
+/// best evaluation.
+pub fn learn_delayed_pendulum(algo: &str, delay: usize, extra: &[&str]) -> (f64, String) {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let delay = delay.to_string();
-    train(
-        &[
-            "--task",
-            "inverted-pendulum",
-            "--algo",
-            algo,
-            "--delay",
-            &delay,
-            "--steps",
-            "8000",
-            "--warmup-steps",
-            "500",
-            "--eval-every",
-            "2000",
-            "--eval-episodes",
-            "5",
-            "--batch-size",
-            "64",
-            "--seed",
-            "2",
-        ],
-        &run,
-    );
+    let mut args = vec![
+        "--task",
+        "inverted-pendulum",
+        "--algo",
+        algo,
+        "--delay",
+        &delay,
+        "--steps",
+        "8000",
+        "--warmup-steps",
+        "500",
+        "--eval-every",
+        "2000",
+        "--eval-episodes",
+        "5",
+        "--batch-size",
+        "64",
+        "--seed",
+        "2",
+    ];
+    args.extend_from_slice(extra);
+    train(&args, &run);
     best_return(&run)
 }

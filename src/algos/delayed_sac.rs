@@ -1,0 +1,500 @@
+//! Delayed SAC: the model-based baseline of Derman, Dalal & Mannor, "Acting in Delayed
+//! Environments with Non-Stationary Markov Policies" (ICLR 2021). Their Delayed-Q (discrete,
+//! `galdl/rl_delay_basic`) learns a deterministic one-step forward model `f(s, a) → s'` by MSE on
+//! the agent's own replay batches, trains the Q-learner on true, time-aligned states, and acts on
+//! the state predicted by rolling `f` over the pending actions. The continuous version here:
+//!
+//! - SAC on the true time-aligned `(s_τ, a_τ, r_τ, s_{τ+1})` of the replay (exactly `sac.rs`'s
+//!   learner: critic Eq. 5, actor Eq. 7, temperature Eq. 18 of Haarnoja et al. 2018);
+//! - an MLP forward model trained by `L_f = E[‖f(s_τ, a_τ) − s_{τ+1}‖²] / dim(S)` on the same
+//!   batch, which predicts the difference `s' − s` (added back to `s`) from inputs normalised by
+//!   running means and standard deviations of the states and actions it was trained on (both
+//!   are fields; the README gives the measured comparison of the choices);
+//! - acting: `a_t ~ π(f^Δ(s_{t−Δ}, a_{t−Δ}, …, a_{t−1}))`, `f^Δ` the model applied Δ times to
+//!   the observation and the pending actions of `x_t`.
+//!
+//! The paper attributes delayed SAC's weakness to the error that accumulates over the Δ
+//! predictions, so `train.csv` logs it on every batch: `model_loss` (one step, against the true
+//! `s_{τ+1}`), `rollout_error` (Δ steps from `s_{τ−Δ}`, against the true `s_τ` the policy
+//! should have seen) and `rollout_error_mean` (the mean over the Δ intermediate true states
+//! `s_{τ−Δ+1..τ}`), each per state dimension, by the model before its step.
+use std::path::Path;
+
+use burn::module::Module;
+use burn::optim::{GradientsParams, ModuleOptimizer};
+use burn::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::sac::{
+    SacBatch, SacLearner, SacStats, adam, load_error, materialize, rows, save_error,
+    transition_tensors,
+};
+use super::{
+    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig, Stats, UpdateContext,
+    check,
+};
+use crate::delay::{BatchExtras, ReplayError, Transitions};
+use crate::learn::{Devices, LearnError, Mlp, MlpConfig, matrix, to_vec};
+use crate::seeds;
+
+/// What the model's network outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelOutput {
+    /// `s' − s`, added back to `s` (`f(s, a) = s + g(s, a)`).
+    Difference,
+    /// `s'` itself (`f(s, a) = g(s, a)`).
+    NextState,
+}
+
+crate::algo_config! {
+    /// Delayed SAC's configuration: SAC's, and the forward model's.
+    pub struct Config {
+        ..sac: SacConfig;
+        /// What the model's network predicts: "difference" (s' − s) or "next-state" (s').
+        pub model_output: ModelOutput = ModelOutput::Difference,
+        /// Normalise the model's inputs (s, a) by the running mean and standard deviation of
+        /// every batch it has been trained on.
+        pub normalise_model_inputs: bool = true,
+        /// Hidden layer widths of the model (ReLU MLP).
+        pub model_hidden: Vec<usize> = vec![256, 256],
+        /// Adam learning rate of the model.
+        pub model_learning_rate: f64 = 1e-3,
+    }
+}
+
+impl AlgoConfig for Config {
+    const INFO: AlgoInfo = AlgoInfo::single_learner(
+        "delayed-sac",
+        "SAC on s_t, acting on the state a learned one-step model predicts over the Δ pending actions",
+        false,
+    );
+
+    fn validate(&self) -> Result<(), AlgoError> {
+        let algo = Self::INFO.name;
+        self.sac.check(algo)?;
+        check(
+            !self.model_hidden.contains(&0),
+            algo,
+            "model_hidden",
+            "a list of positive widths",
+            format!("{:?}", self.model_hidden),
+        )?;
+        check(
+            self.model_learning_rate > 0.0 && self.model_learning_rate.is_finite(),
+            algo,
+            "model_learning_rate",
+            "a positive number",
+            self.model_learning_rate,
+        )
+    }
+
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        Box::new(DelayedSac::new(self, spec, devices, seed))
+    }
+}
+
+/// `train.csv` columns beside SAC's.
+const MODEL_STATS: [&str; 3] = ["model_loss", "rollout_error", "rollout_error_mean"];
+
+/// Running mean and variance of the model's inputs, merged batch by batch (Chan et al.).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InputMoments {
+    count: f64,
+    mean: Vec<f64>,
+    /// Sums of squared deviations from the mean.
+    m2: Vec<f64>,
+}
+
+impl InputMoments {
+    fn new(width: usize) -> InputMoments {
+        InputMoments {
+            count: 0.0,
+            mean: vec![0.0; width],
+            m2: vec![0.0; width],
+        }
+    }
+
+    /// Merges the rows of `inputs` (`[n, width]`, row-major).
+    fn add(&mut self, inputs: &[f32]) {
+        let width = self.mean.len();
+        let n = (inputs.len() / width) as f64;
+        for j in 0..width {
+            let column = inputs.iter().skip(j).step_by(width).map(|&v| f64::from(v));
+            let batch_mean = column.clone().sum::<f64>() / n;
+            let batch_m2: f64 = column.map(|v| (v - batch_mean).powi(2)).sum();
+            let delta = batch_mean - self.mean[j];
+            let total = self.count + n;
+            self.mean[j] += delta * n / total;
+            self.m2[j] += batch_m2 + delta * delta * self.count * n / total;
+        }
+        self.count += n;
+    }
+
+    /// `(mean, std)` as `[1, width]` rows; a dimension that has not varied keeps scale 1.
+    fn tensors(&self, device: &Device) -> (Tensor<2>, Tensor<2>) {
+        let width = self.mean.len();
+        let std = self
+            .m2
+            .iter()
+            .map(|m2| (m2 / self.count.max(1.0)).sqrt())
+            .map(|s| if s < 1e-12 { 1.0 } else { s as f32 });
+        (
+            matrix(
+                self.mean.iter().map(|&m| m as f32).collect(),
+                1,
+                width,
+                device,
+            ),
+            matrix(std.collect(), 1, width, device),
+        )
+    }
+}
+
+/// The learned one-step model `f(s, a)`.
+pub struct ForwardModel {
+    pub network: Mlp,
+    pub output: ModelOutput,
+    /// `None` when inputs are not normalised.
+    pub moments: Option<InputMoments>,
+}
+
+impl ForwardModel {
+    /// `f(s, a)` for `[B, obs]` states and `[B, act]` actions, with `network` (the model itself,
+    /// or its plain copy off the graph).
+    pub fn predict(
+        &self,
+        network: &Mlp,
+        state: Tensor<2>,
+        action: Tensor<2>,
+        device: &Device,
+    ) -> Tensor<2> {
+        let input = Tensor::cat(vec![state.clone(), action], 1);
+        let input = match &self.moments {
+            Some(moments) => {
+                let (mean, std) = moments.tensors(device);
+                (input - mean) / std
+            }
+            None => input,
+        };
+        let out = network.forward(input);
+        match self.output {
+            ModelOutput::Difference => state + out,
+            ModelOutput::NextState => out,
+        }
+    }
+
+    /// `f^k(s_{τ−Δ}, a_{τ−Δ}, …)` for k = 1..=Δ from augmented states `[B, obs + Δ·act]`, off the
+    /// graph: the predicted `ŝ_{τ−Δ+k}`, oldest first.
+    pub fn rollout(&self, augmented: Tensor<2>, spec: &AgentSpec) -> Vec<Tensor<2>> {
+        let (obs, act) = (spec.obs_dim, spec.act_dim);
+        let rows = augmented.dims()[0];
+        let device = augmented.device();
+        let network = self.network.valid();
+        let mut state = augmented.clone().slice([0..rows, 0..obs]);
+        (0..spec.delay)
+            .map(|k| {
+                let action = augmented
+                    .clone()
+                    .slice([0..rows, obs + k * act..obs + (k + 1) * act]);
+                state = self.predict(&network, state.clone(), action, &device);
+                state.clone()
+            })
+            .collect()
+    }
+}
+
+/// The model's loss (and logged error) per state dimension: `E[‖ŝ − s‖²] / dim(S)`.
+pub fn prediction_error(predicted: Tensor<2>, truth: Tensor<2>) -> Tensor<1> {
+    (predicted - truth).square().mean()
+}
+
+pub struct DelayedSac {
+    spec: AgentSpec,
+    /// SAC on the true state.
+    learner: SacLearner,
+    model: ForwardModel,
+    model_opt: ModuleOptimizer,
+    model_learning_rate: f64,
+}
+
+impl DelayedSac {
+    pub fn new(config: &Config, spec: &AgentSpec, devices: &Devices, seed: u64) -> DelayedSac {
+        let learner = SacLearner::new(spec.obs_dim, spec.obs_dim, spec, &config.sac, devices, seed);
+        devices.train.seed(seeds::named(seed, "delayed-sac/model"));
+        let network = MlpConfig::new(
+            spec.obs_dim + spec.act_dim,
+            &config.model_hidden,
+            spec.obs_dim,
+        )
+        .init(&devices.train);
+        materialize(&network);
+        DelayedSac {
+            spec: spec.clone(),
+            learner,
+            model: ForwardModel {
+                network,
+                output: config.model_output,
+                moments: config
+                    .normalise_model_inputs
+                    .then(|| InputMoments::new(spec.obs_dim + spec.act_dim)),
+            },
+            model_opt: adam(&config.sac),
+            model_learning_rate: config.model_learning_rate,
+        }
+    }
+
+    /// The Δ-step errors of the model on `batch`: at `s_τ`, and the mean over `s_{τ−Δ+1..τ}`.
+    fn rollout_errors(&self, batch: &Transitions, device: &Device) -> Option<(f64, f64)> {
+        let (n, obs, delay) = (batch.len(), self.spec.obs_dim, self.spec.delay);
+        if delay == 0 {
+            return None;
+        }
+        let predicted = self
+            .model
+            .rollout(rows(batch.augmented.clone(), n, device), &self.spec);
+        let truth = matrix(batch.intermediate_states.clone(), n * delay, obs, device)
+            .reshape([n, delay * obs]);
+        let errors: Vec<f64> = predicted
+            .into_iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let true_k = truth.clone().slice([0..n, k * obs..(k + 1) * obs]);
+                f64::from(prediction_error(p, true_k).into_scalar::<f32>())
+            })
+            .collect();
+        Some((errors[delay - 1], errors.iter().sum::<f64>() / delay as f64))
+    }
+}
+
+impl Agent for DelayedSac {
+    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+        let plain = self.learner.devices.plain.clone();
+        let x = matrix(
+            augmented[..rows * self.spec.augmented_dim()].to_vec(),
+            rows,
+            self.spec.augmented_dim(),
+            &plain,
+        );
+        let predicted = match self.model.rollout(x.clone(), &self.spec).pop() {
+            Some(state) => state,
+            None => x, // Δ = 0: x_t = s_t
+        };
+        to_vec(match mode {
+            ActMode::Explore => self.learner.explore(predicted),
+            ActMode::Deterministic => self.learner.exploit(predicted),
+        })
+    }
+
+    fn stat_names(&self) -> Vec<&'static str> {
+        SacStats::NAMES
+            .iter()
+            .chain(&MODEL_STATS)
+            .copied()
+            .collect()
+    }
+
+    fn batch_extras(&self) -> BatchExtras {
+        BatchExtras {
+            intermediate_states: true,
+        }
+    }
+
+    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
+        let batch = &ctx.batch()?;
+        let plain = self.learner.devices.plain.clone();
+        let n = batch.len();
+        let tensors = transition_tensors(batch, &plain);
+
+        // SAC on the true, time-aligned (s, a, r, s').
+        let mut stats = self
+            .learner
+            .update(&SacBatch {
+                actor_input: tensors.critic_input.clone(),
+                next_actor_input: tensors.next_critic_input.clone(),
+                ..tensors.clone()
+            })
+            .named();
+
+        // The Δ-step errors, then one model step on L_f, after merging the batch's inputs into
+        // the normalisation statistics.
+        let rollout = self.rollout_errors(batch, &plain);
+        if let Some(moments) = &mut self.model.moments {
+            let inputs: Vec<f32> = batch
+                .state
+                .chunks(self.spec.obs_dim)
+                .zip(batch.action.chunks(self.spec.act_dim))
+                .flat_map(|(s, a)| s.iter().chain(a).copied())
+                .collect();
+            moments.add(&inputs);
+        }
+        let predicted = self.model.predict(
+            &self.model.network,
+            tensors.critic_input.clone(),
+            tensors.action.clone(),
+            &plain,
+        );
+        let loss = prediction_error(predicted, rows(batch.next_state.clone(), n, &plain));
+        let model_loss = f64::from(loss.clone().inner().into_scalar::<f32>());
+        let grads = GradientsParams::from_grads(loss.backward(), &self.model.network);
+        self.model.network =
+            self.model_opt
+                .step(self.model_learning_rate, self.model.network.clone(), grads);
+
+        stats.push((MODEL_STATS[0], model_loss));
+        if let Some((at_state, mean)) = rollout {
+            stats.extend([(MODEL_STATS[1], at_state), (MODEL_STATS[2], mean)]);
+        }
+        Ok(stats)
+    }
+
+    fn save(&self, dir: &Path) -> Result<(), LearnError> {
+        self.learner.save(dir, "")?;
+        let p = dir.join("model.bpk");
+        self.model
+            .network
+            .clone()
+            .save_file(&p)
+            .map_err(|e| save_error(&p, e))?;
+        let p = dir.join("model_adam.bpk");
+        self.model_opt.save(&p).map_err(|e| save_error(&p, e))?;
+        let p = dir.join("model_inputs.json");
+        let moments = serde_json::to_vec(&self.model.moments).map_err(|e| save_error(&p, e))?;
+        std::fs::write(&p, moments).map_err(|e| save_error(&p, e))
+    }
+
+    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
+        self.learner.load(dir, "")?;
+        let p = dir.join("model.bpk");
+        self.model.network = self
+            .model
+            .network
+            .clone()
+            .try_load_file(&p)
+            .map_err(|e| load_error(&p, e))?;
+        let p = dir.join("model_adam.bpk");
+        self.model_opt = self
+            .model_opt
+            .clone()
+            .load(&p)
+            .map_err(|e| load_error(&p, e))?;
+        let p = dir.join("model_inputs.json");
+        let bytes = std::fs::read(&p).map_err(|e| load_error(&p, e))?;
+        self.model.moments = serde_json::from_slice(&bytes).map_err(|e| load_error(&p, e))?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::module::Param;
+    use burn::nn::Linear;
+
+    use super::*;
+    use crate::learn::LearnDevice;
+
+    fn close(found: &[f32], expected: &[f32]) {
+        assert_eq!(found.len(), expected.len(), "{found:?} vs {expected:?}");
+        for (f, e) in found.iter().zip(expected) {
+            assert!((f - e).abs() < 1e-5, "{found:?} vs {expected:?}");
+        }
+    }
+
+    /// The linear system `s' = s + (0.5·s + 2·a)`, i.e. `s' = 1.5·s + 2·a`, as a model whose
+    /// network is one linear layer `g(s, a) = 0.5·s + 2·a` predicting the difference.
+    fn linear_model(device: &Device) -> ForwardModel {
+        ForwardModel {
+            network: Mlp {
+                layers: vec![Linear {
+                    weight: Param::from_data([[0.5f32], [2.0]], device),
+                    bias: Some(Param::from_data([0.0f32], device)),
+                }],
+            },
+            output: ModelOutput::Difference,
+            moments: None,
+        }
+    }
+
+    fn spec(delay: usize) -> AgentSpec {
+        AgentSpec {
+            obs_dim: 1,
+            act_dim: 1,
+            delay,
+            action_low: vec![-1.0],
+            action_high: vec![1.0],
+        }
+    }
+
+    #[test]
+    fn model_loss_and_delta_step_rollout_match_hand_values_on_a_linear_system() {
+        let device = Devices::new(LearnDevice::Cpu).unwrap().plain;
+        let model = linear_model(&device);
+        // One step: f(1, 0) = 1.5, f(2, 1) = 3 + 2 = 5; against s' = (1, 5) the errors are
+        // 0.5 and 0, so L_f = (0.25 + 0) / 2.
+        let predicted = model.predict(
+            &model.network,
+            matrix(vec![1.0, 2.0], 2, 1, &device),
+            matrix(vec![0.0, 1.0], 2, 1, &device),
+            &device,
+        );
+        close(&to_vec(predicted.clone()), &[1.5, 5.0]);
+        let loss = prediction_error(predicted, matrix(vec![1.0, 5.0], 2, 1, &device));
+        close(&to_vec(loss), &[0.125]);
+
+        // Δ = 3 from x = (s = 1; a = 1, −1, 0.5): 1.5 + 2 = 3.5, 5.25 − 2 = 3.25,
+        // 4.875 + 1 = 5.875.
+        let x = matrix(vec![1.0, 1.0, -1.0, 0.5], 1, 4, &device);
+        let rollout: Vec<f32> = model
+            .rollout(x, &spec(3))
+            .into_iter()
+            .flat_map(to_vec)
+            .collect();
+        close(&rollout, &[3.5, 3.25, 5.875]);
+
+        // The same system with the network predicting s' itself: g = 1.5·s + 2·a.
+        let next_state = ForwardModel {
+            network: Mlp {
+                layers: vec![Linear {
+                    weight: Param::from_data([[1.5f32], [2.0]], &device),
+                    bias: Some(Param::from_data([0.0f32], &device)),
+                }],
+            },
+            output: ModelOutput::NextState,
+            moments: None,
+        };
+        let x = matrix(vec![1.0, 1.0, -1.0, 0.5], 1, 4, &device);
+        let rollout: Vec<f32> = next_state
+            .rollout(x, &spec(3))
+            .into_iter()
+            .flat_map(to_vec)
+            .collect();
+        close(&rollout, &[3.5, 3.25, 5.875]);
+    }
+
+    #[test]
+    fn normalised_inputs_use_the_moments_of_every_batch_seen() {
+        let device = Devices::new(LearnDevice::Cpu).unwrap().plain;
+        let mut moments = InputMoments::new(2);
+        // Rows (s, a): (1, 0), (3, 0) then (5, 0): mean (3, 0), population std (√(8/3), 0).
+        moments.add(&[1.0, 0.0, 3.0, 0.0]);
+        moments.add(&[5.0, 0.0]);
+        let (mean, std) = moments.tensors(&device);
+        close(&to_vec(mean), &[3.0, 0.0]);
+        // A dimension that never varied keeps scale 1.
+        close(&to_vec(std), &[(8.0f32 / 3.0).sqrt(), 1.0]);
+
+        // The model sees ((s − 3)/σ, a): with g = 0.5·ŝ + 2·a and s = 3 + σ, a = 1, f = s + 2.5.
+        let model = ForwardModel {
+            moments: Some(moments),
+            ..linear_model(&device)
+        };
+        let sigma = (8.0f32 / 3.0).sqrt();
+        let predicted = model.predict(
+            &model.network,
+            matrix(vec![3.0 + sigma], 1, 1, &device),
+            matrix(vec![1.0], 1, 1, &device),
+            &device,
+        );
+        close(&to_vec(predicted), &[3.0 + sigma + 2.5]);
+    }
+}
