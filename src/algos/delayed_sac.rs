@@ -160,21 +160,24 @@ pub struct ForwardModel {
 }
 
 impl ForwardModel {
+    /// The inputs' `(mean, std)` rows on `device`, when inputs are normalised: built once per
+    /// batch or rollout and handed to every [`ForwardModel::predict`] of it.
+    pub fn normaliser(&self, device: &Device) -> Option<(Tensor<2>, Tensor<2>)> {
+        self.moments.as_ref().map(|moments| moments.tensors(device))
+    }
+
     /// `f(s, a)` for `[B, obs]` states and `[B, act]` actions, with `network` (the model itself,
-    /// or its plain copy off the graph).
+    /// or its plain copy off the graph) and the model's [`ForwardModel::normaliser`].
     pub fn predict(
         &self,
         network: &Mlp,
+        normaliser: Option<&(Tensor<2>, Tensor<2>)>,
         state: Tensor<2>,
         action: Tensor<2>,
-        device: &Device,
     ) -> Tensor<2> {
         let input = Tensor::cat(vec![state.clone(), action], 1);
-        let input = match &self.moments {
-            Some(moments) => {
-                let (mean, std) = moments.tensors(device);
-                (input - mean) / std
-            }
+        let input = match normaliser {
+            Some((mean, std)) => (input - mean.clone()) / std.clone(),
             None => input,
         };
         let out = network.forward(input);
@@ -189,7 +192,7 @@ impl ForwardModel {
     pub fn rollout(&self, augmented: Tensor<2>, spec: &AgentSpec) -> Vec<Tensor<2>> {
         let (obs, act) = (spec.obs_dim, spec.act_dim);
         let rows = augmented.dims()[0];
-        let device = augmented.device();
+        let normaliser = self.normaliser(&augmented.device());
         let network = self.network.valid();
         let mut state = augmented.clone().slice([0..rows, 0..obs]);
         (0..spec.delay)
@@ -197,7 +200,7 @@ impl ForwardModel {
                 let action = augmented
                     .clone()
                     .slice([0..rows, obs + k * act..obs + (k + 1) * act]);
-                state = self.predict(&network, state.clone(), action, &device);
+                state = self.predict(&network, normaliser.as_ref(), state.clone(), action);
                 state.clone()
             })
             .collect()
@@ -330,9 +333,9 @@ impl Agent for DelayedSac {
         }
         let predicted = self.model.predict(
             &self.model.network,
+            self.model.normaliser(&plain).as_ref(),
             tensors.critic_input.clone(),
             tensors.action.clone(),
-            &plain,
         );
         let loss = prediction_error(predicted, rows(batch.next_state.clone(), n, &plain));
         let model_loss = f64::from(loss.clone().inner().into_scalar::<f32>());
@@ -391,14 +394,7 @@ mod tests {
     use burn::nn::Linear;
 
     use super::*;
-    use crate::learn::LearnDevice;
-
-    fn close(found: &[f32], expected: &[f32]) {
-        assert_eq!(found.len(), expected.len(), "{found:?} vs {expected:?}");
-        for (f, e) in found.iter().zip(expected) {
-            assert!((f - e).abs() < 1e-5, "{found:?} vs {expected:?}");
-        }
-    }
+    use crate::learn::{LearnDevice, assert_close as close};
 
     /// The linear system `s' = s + (0.5·s + 2·a)`, i.e. `s' = 1.5·s + 2·a`, as a model whose
     /// network is one linear layer `g(s, a) = 0.5·s + 2·a` predicting the difference.
@@ -433,9 +429,9 @@ mod tests {
         // 0.5 and 0, so L_f = (0.25 + 0) / 2.
         let predicted = model.predict(
             &model.network,
+            None,
             matrix(vec![1.0, 2.0], 2, 1, &device),
             matrix(vec![0.0, 1.0], 2, 1, &device),
-            &device,
         );
         close(&to_vec(predicted.clone()), &[1.5, 5.0]);
         let loss = prediction_error(predicted, matrix(vec![1.0, 5.0], 2, 1, &device));
@@ -491,9 +487,9 @@ mod tests {
         let sigma = (8.0f32 / 3.0).sqrt();
         let predicted = model.predict(
             &model.network,
+            model.normaliser(&device).as_ref(),
             matrix(vec![3.0 + sigma], 1, 1, &device),
             matrix(vec![1.0], 1, 1, &device),
-            &device,
         );
         close(&to_vec(predicted), &[3.0 + sigma + 2.5]);
     }

@@ -553,14 +553,7 @@ impl Agent for Vdpo {
 mod tests {
     use super::*;
     use crate::algos::random_batch;
-    use crate::learn::LearnDevice;
-
-    fn close(found: &[f32], expected: &[f32]) {
-        assert_eq!(found.len(), expected.len(), "{found:?} vs {expected:?}");
-        for (f, e) in found.iter().zip(expected) {
-            assert!((f - e).abs() < 1e-5, "{found:?} vs {expected:?}");
-        }
-    }
+    use crate::learn::{LearnDevice, assert_close as close};
 
     #[test]
     fn gaussian_kl_matches_hand_values() {

@@ -20,6 +20,8 @@ pub use nets::{
     QNetwork, Temperature, TwinQ, squashed_sample, squashed_samples_k,
 };
 pub use noise::Noise;
+#[cfg(test)]
+pub(crate) use tensors::assert_close;
 pub use tensors::{column, matrix, to_vec};
 
 /// What can go wrong while learning, saving or loading.

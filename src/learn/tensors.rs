@@ -20,3 +20,12 @@ pub fn to_vec<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
         .try_into_vec::<f32>()
         .expect("a float tensor converts to f32")
 }
+
+/// Asserts `found` equals `expected` entry by entry within 1e-5 (the unit tests' hand values).
+#[cfg(test)]
+pub(crate) fn assert_close(found: &[f32], expected: &[f32]) {
+    assert_eq!(found.len(), expected.len(), "{found:?} vs {expected:?}");
+    for (f, e) in found.iter().zip(expected) {
+        assert!((f - e).abs() < 1e-5, "{found:?} vs {expected:?}");
+    }
+}
