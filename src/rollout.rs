@@ -4,13 +4,11 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::delay::{CpuDelayLayer, DelayConfig, DelayError, DelayLayer, StepInput, arrival_delay};
+use crate::delay::{BatchError, DelayConfig, DelayDevice, DelayLayer, DelayedBatch, arrival_delay};
 use crate::delay::{RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED};
-use crate::sim::{Env, SimError, TaskModel, actuator_noise, check_vector, executed_action};
+use crate::sim::{BatchConfig, Env, SimError, TaskModel, check_vector};
 use crate::tasks::TaskName;
 
 #[derive(Debug, thiserror::Error)]
@@ -50,7 +48,9 @@ pub enum RolloutError {
     #[error(transparent)]
     Sim(#[from] SimError),
     #[error(transparent)]
-    Delay(#[from] DelayError),
+    Delay(#[from] crate::delay::DelayError),
+    #[error(transparent)]
+    Batch(#[from] BatchError),
 }
 
 /// `{"qpos": [...], "qvel": [...]}`.
@@ -196,59 +196,86 @@ fn narrow(values: &[f64]) -> Vec<f32> {
 }
 
 /// Sets the state, then applies the actions until they run out or the episode ends, calling
-/// `emit` for the initial line and after every step. `delay` switches to the delayed trace;
-/// `seed` drives actuator noise and random delays.
+/// `emit` for the initial line and after every step.
+///
+/// Without `delay` the trace is one [`Env`]'s, in f64 (Gymnasium's own precision, for parity
+/// checks). With `delay` it is the [`DelayedBatch`] that training and evaluation run (one
+/// copy, its delay layer on `device`): the actions reach it as f32, as a policy's do, so an
+/// action file meant to match the undelayed trace step for step should hold f32 values.
+/// `seed` drives actuator noise and random delays. The file's actions are applied from the
+/// first step on: no warm-up actions replace them.
 pub fn rollout(
     task: TaskName,
     state: &InitialState,
     actions: &[Vec<f64>],
-    delay: Option<&DelayConfig>,
+    delay: Option<(&DelayConfig, DelayDevice)>,
+    seed: u64,
+    emit: impl FnMut(&TraceStep),
+) -> Result<(), RolloutError> {
+    match delay {
+        None => undelayed(task, state, actions, emit),
+        Some((config, device)) => delayed(task, state, actions, config, device, seed, emit),
+    }
+}
+
+fn undelayed(
+    task: TaskName,
+    state: &InitialState,
+    actions: &[Vec<f64>],
+    mut emit: impl FnMut(&TraceStep),
+) -> Result<(), RolloutError> {
+    let mut env = Env::new(TaskModel::load(task)?);
+    env.set_state(&state.qpos, &state.qvel)?;
+    let mut obs = vec![0.0; task.def().obs_dim];
+    env.observe(&mut obs);
+    emit(&TraceStep {
+        obs: Some(obs.clone()),
+        ..TraceStep::at(0)
+    });
+    for (k, action) in actions.iter().enumerate() {
+        check_vector("action", action, task.def().act_dim)?;
+        let outcome = env.step(action, &mut obs);
+        emit(&TraceStep {
+            obs: Some(obs.clone()),
+            reward: Some(outcome.reward),
+            terminated: Some(outcome.terminated),
+            truncated: Some(outcome.truncated),
+            ..TraceStep::at(k + 1)
+        });
+        if outcome.done() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+fn delayed(
+    task: TaskName,
+    state: &InitialState,
+    actions: &[Vec<f64>],
+    config: &DelayConfig,
+    device: DelayDevice,
     seed: u64,
     mut emit: impl FnMut(&TraceStep),
 ) -> Result<(), RolloutError> {
-    let model = TaskModel::load(task)?;
-    let mut env = Env::new(model.clone());
-    env.set_state(&state.qpos, &state.qvel)?;
     let (obs_dim, act_dim) = (task.def().obs_dim, task.def().act_dim);
-    let mut obs = vec![0.0; obs_dim];
-    env.observe(&mut obs);
-    let Some(config) = delay else {
-        emit(&TraceStep {
-            obs: Some(obs.clone()),
-            ..TraceStep::at(0)
-        });
-        for (k, action) in actions.iter().enumerate() {
-            check_vector("action", action, act_dim)?;
-            let outcome = env.step(action, &mut obs);
-            emit(&TraceStep {
-                obs: Some(obs.clone()),
-                reward: Some(outcome.reward),
-                terminated: Some(outcome.terminated),
-                truncated: Some(outcome.truncated),
-                ..TraceStep::at(k + 1)
-            });
-            if outcome.done() {
-                break;
-            }
-        }
-        return Ok(());
-    };
-
     let delay_steps = config.total_delay()?;
-    let noise = actuator_noise(config.actuator_noise)?;
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut layer = CpuDelayLayer::new(
+    let mut batch = DelayedBatch::new(
+        &BatchConfig {
+            task,
+            envs: 1,
+            threads: 1,
+            seed,
+            actuator_noise: config.actuator_noise,
+        },
         config,
-        1,
-        obs_dim,
-        &model.action_low,
-        &model.action_high,
+        device,
         seed,
     )?;
-    layer.reset(&narrow(&obs))?;
+    batch.restart_from(&state.qpos, &state.qvel)?;
     // The states sent so far, s_0 … s_t, for the arrivals of random delays.
-    let mut sent = vec![narrow(&obs)];
-    let ready_line = |layer: &CpuDelayLayer, t: usize| {
+    let mut sent = vec![batch.env().observations().to_vec()];
+    let ready_line = |layer: &dyn DelayLayer, t: usize| {
         let ready = layer.ready()[0] == 1;
         TraceStep {
             obs: ready.then(|| widen(&layer.augmented()[..obs_dim])),
@@ -256,37 +283,31 @@ pub fn rollout(
             ..TraceStep::at(t)
         }
     };
-    emit(&ready_line(&layer, 0));
-    let mut executed = vec![0.0; act_dim];
+    emit(&ready_line(batch.layer(), 0));
     for (k, action) in actions.iter().enumerate() {
         check_vector("action", action, act_dim)?;
-        executed_action(action, noise, &mut rng, &model, &mut executed);
-        let outcome = env.step(&executed, &mut obs);
-        let (chosen, next) = (narrow(action), narrow(&obs));
-        sent.push(next.clone());
-        layer.step(&StepInput {
-            actions: &chosen,
-            observations: &next,
-            final_observations: &next,
-            rewards: &[outcome.reward as f32],
-            terminated: &[u32::from(outcome.terminated)],
-            truncated: &[u32::from(outcome.truncated)],
-        })?;
-        let t = k + 1;
-        let mut line = if outcome.done() {
-            end_line(&layer, t, delay_steps)
+        batch.step(&narrow(action))?;
+        let env = batch.env();
+        let done = env.terminated()[0] == 1 || env.truncated()[0] == 1;
+        sent.push(if done {
+            env.final_observations().to_vec()
         } else {
-            ready_line(&layer, t)
+            env.observations().to_vec()
+        });
+        let t = k + 1;
+        let layer = batch.layer();
+        let mut line = if done {
+            end_line(layer, t, delay_steps)
+        } else {
+            ready_line(layer, t)
         };
-        if !outcome.done()
-            && let Some(record) = layer.records().iter().next()
-        {
+        if !done && let Some(record) = layer.records().iter().next() {
             // The record of step t − Δ − 1 completed: its reward travels with s_{t-Δ}.
             line.reward = Some(f64::from(record.reward));
             (line.terminated, line.truncated) = (Some(false), Some(false));
         }
-        if noise.is_some() {
-            line.executed = Some(executed.clone());
+        if config.actuator_noise > 0.0 {
+            line.executed = Some(env.executed_action(0).to_vec());
         }
         if let Some(bound) = config.random_bound() {
             let arrived = (t.saturating_sub(bound)..t)
@@ -298,7 +319,7 @@ pub fn rollout(
             line.arrived = Some(arrived.collect());
         }
         emit(&line);
-        if outcome.done() {
+        if done {
             break;
         }
     }
@@ -307,7 +328,7 @@ pub fn rollout(
 
 /// The line of the step that ended the episode at `t = T`: the regular arrival `s_{T-Δ}` and,
 /// delivered at once, `s_{T-Δ+1} … s_T`, each with the reward and flags of its step.
-fn end_line(layer: &CpuDelayLayer, t: usize, delay: usize) -> TraceStep {
+fn end_line(layer: &dyn DelayLayer, t: usize, delay: usize) -> TraceStep {
     let mut states = BTreeMap::new();
     let mut steps = BTreeMap::new();
     for record in layer.records().iter() {

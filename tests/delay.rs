@@ -2,8 +2,8 @@
 use std::collections::BTreeMap;
 
 use dhrl::delay::{
-    BatchExtras, CpuDelayLayer, DelayConfig, DelayError, DelayLayer, GpuDelayLayer, MAX_DELAY,
-    RecordBatch, ReplayStore, StepInput, Transitions, WarmupActions,
+    BatchExtras, CpuDelayLayer, DelayConfig, DelayDevice, DelayError, DelayLayer, GpuDelayLayer,
+    MAX_DELAY, RecordBatch, ReplayStore, StepInput, Transitions, WarmupActions,
 };
 use dhrl::sim::{BatchConfig, BatchedEnv};
 use dhrl::tasks::TaskName;
@@ -542,11 +542,16 @@ fn random_delay_arrivals_follow_the_channel_model() {
         qpos: vec![0.0; 9],
         qvel: vec![0.0; 9],
     };
+    // f32 actions: the delayed trace runs the training path, which takes actions as f32.
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let actions: Vec<Vec<f64>> = (0..400)
-        .map(|_| (0..6).map(|_| rng.random_range(-1.0..1.0)).collect())
+        .map(|_| {
+            (0..6)
+                .map(|_| f64::from(rng.random_range(-1.0f32..1.0)))
+                .collect()
+        })
         .collect();
-    let trace = |delay: Option<&DelayConfig>, seed: u64| {
+    let trace = |delay: Option<(&DelayConfig, DelayDevice)>, seed: u64| {
         let mut lines: Vec<TraceStep> = Vec::new();
         rollout(TaskName::HalfCheetah, &state, &actions, delay, seed, |l| {
             lines.push(l.clone())
@@ -567,7 +572,7 @@ fn random_delay_arrivals_follow_the_channel_model() {
         })
         .collect();
     let arrivals_of = |seed: u64| {
-        let lines = trace(Some(&config), seed);
+        let lines = trace(Some((&config, DelayDevice::Cpu)), seed);
         assert_eq!(lines.len(), truth.len());
         let mut arrived_at = BTreeMap::new();
         for line in &lines[1..] {

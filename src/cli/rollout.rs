@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use dhrl::delay::{DelayArgs, DelayConfig};
+use dhrl::delay::{DelayArgs, DelayConfig, DelayDevice};
 use dhrl::rollout::{read_actions, read_state, rollout};
 use dhrl::tasks::TaskName;
 
@@ -22,6 +22,10 @@ pub struct RolloutArgs {
     /// Any delay option turns the trace into what the delayed agent receives.
     #[command(flatten)]
     delay: DelayArgs,
+    /// Where the delayed trace's delay layer runs (its ring buffers on the CPU, or in WGSL
+    /// kernels on any Vulkan adapter); cpu unless given. Giving it asks for the delayed trace.
+    #[arg(long, value_enum)]
+    delay_device: Option<DelayDevice>,
     /// Seed of actuator noise and random delays.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -30,7 +34,7 @@ pub struct RolloutArgs {
 pub fn run(args: &RolloutArgs) -> anyhow::Result<()> {
     let state = read_state(&args.init_state)?;
     let actions = read_actions(&args.actions, args.task)?;
-    let delay = if args.delay.any() {
+    let delay = if args.delay.any() || args.delay_device.is_some() {
         Some(args.delay.apply(DelayConfig::default())?)
     } else {
         None
@@ -41,7 +45,9 @@ pub fn run(args: &RolloutArgs) -> anyhow::Result<()> {
         args.task,
         &state,
         &actions,
-        delay.as_ref(),
+        delay
+            .as_ref()
+            .map(|config| (config, args.delay_device.unwrap_or_default())),
         args.seed,
         |step| {
             if write_error.is_none()

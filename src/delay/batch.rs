@@ -1,6 +1,7 @@
 //! The one delayed-batch path: a batched simulator and a delay layer (CPU or GPU) stepped
 //! together, with warm-up actions for copies that have observed nothing yet and a policy
-//! acting on the augmented states of the ready ones. Training and evaluation both run it.
+//! acting on the augmented states of the ready ones. Training, evaluation and the delayed
+//! trace of `dhrl rollout` all run it.
 use super::{
     DelayConfig, DelayDevice, DelayError, DelayLayer, DelayLayout, StepInput, delay_layer,
 };
@@ -63,6 +64,16 @@ impl DelayedBatch {
 
     pub fn layout(&self) -> DelayLayout {
         self.layer.layout()
+    }
+
+    /// Restarts every copy's episode from the state `(qpos, qvel)` (Gymnasium's `set_state`),
+    /// and the delay layer with them: the first step after it is step 1 of the new episodes.
+    pub fn restart_from(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), BatchError> {
+        for copy in 0..self.env.len() {
+            self.env.set_state(copy, qpos, qvel)?;
+        }
+        self.layer.reset(self.env.observations())?;
+        Ok(())
     }
 
     /// Fills `actions` (`[N, act_dim]`): `policy` chooses for the ready copies that `acting`

@@ -268,6 +268,35 @@ impl BatchedEnv {
         Ok(())
     }
 
+    /// Puts copy `copy` into the state `(qpos, qvel)` (Gymnasium's `set_state`) at the start
+    /// of an episode: its time limit and running return restart and its row of
+    /// `observations` becomes the observation of that state.
+    pub fn set_state(&mut self, copy: usize, qpos: &[f64], qvel: &[f64]) -> Result<(), SimError> {
+        let n = self.copies.len();
+        let obs_dim = self.obs_dim();
+        let Some(target) = self.copies.get_mut(copy) else {
+            return Err(SimError::WrongLength {
+                what: "the batch of copies (for the copy to set)",
+                found: n,
+                expected: copy + 1,
+            });
+        };
+        target.env.set_state(qpos, qvel)?;
+        target.episode_return = 0.0;
+        target.env.observe(&mut target.obs);
+        write_f32(
+            &mut self.observations[copy * obs_dim..(copy + 1) * obs_dim],
+            &target.obs,
+        );
+        Ok(())
+    }
+
+    /// The action copy `copy`'s actuators received in the last step (the chosen one, or with
+    /// actuator noise added and clipped).
+    pub fn executed_action(&self, copy: usize) -> &[f64] {
+        &self.copies[copy].executed_action
+    }
+
     pub fn task(&self) -> TaskName {
         self.model.task.name
     }
@@ -359,7 +388,7 @@ impl EnvCopy {
 
 /// The action the actuators receive: the chosen one, or `clip(a + N(0, σ²))` under actuator
 /// noise (SPEC §1). Without noise it is passed on unclipped, as Gymnasium does.
-pub fn executed_action(
+fn executed_action(
     action: &[impl Copy + Into<f64>],
     noise: Option<Normal<f64>>,
     rng: &mut impl rand::Rng,
@@ -376,7 +405,7 @@ pub fn executed_action(
 
 /// The actuator noise distribution for σ (`None` for σ = 0), or an error for a negative or
 /// non-finite σ.
-pub fn actuator_noise(sigma: f64) -> Result<Option<Normal<f64>>, SimError> {
+fn actuator_noise(sigma: f64) -> Result<Option<Normal<f64>>, SimError> {
     if !(sigma.is_finite() && sigma >= 0.0) {
         return Err(SimError::TooSmall {
             what: "the actuator noise σ (finite)",

@@ -5,7 +5,7 @@ mod batch;
 mod env;
 mod model;
 
-pub use batch::{BatchConfig, BatchSnapshot, BatchedEnv, actuator_noise, executed_action};
+pub use batch::{BatchConfig, BatchSnapshot, BatchedEnv};
 pub use env::{Env, EnvSnapshot, StepOutcome};
 pub use model::{TaskModel, assets_dir};
 
