@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite, on a fresh machine too: set-up (idempotent), Mesa's software Vulkan
-# where no Vulkan driver is installed (so the WGSL kernels run without a GPU), then every test
-# in release mode. The GPU delay-layer tests fail when no adapter is found; set
+# where no Vulkan driver is installed (so the WGSL kernels and burn's wgpu learner run without a
+# GPU), then every test in release mode. The GPU tests fail when no adapter is found; set
 # DHRL_SKIP_GPU_TESTS=1 to skip them knowingly (they then say so on stderr).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -15,4 +15,9 @@ if [[ "${DHRL_SKIP_GPU_TESTS:-}" != 1 ]] && ! ls /usr/share/vulkan/icd.d/*.json 
         echo "test: no Vulkan driver found; install mesa-vulkan-drivers (Debian/Ubuntu) or set DHRL_SKIP_GPU_TESTS=1" >&2
     fi
 fi
-cargo test --release "$@"
+# Everything is built once, with burn's wgpu learner: tests/wgpu_learner.rs checks it against
+# the CPU learner on a real GPU, or on Mesa's software Vulkan (lavapipe) where there is none.
+if [[ "${DHRL_SKIP_GPU_TESTS:-}" != 1 ]]; then
+    export DHRL_WGPU_SOFTWARE="${DHRL_WGPU_SOFTWARE:-vulkan}" DHRL_REQUIRE_WGPU_LEARNER=1
+fi
+cargo test --release --features wgpu-learner "$@"

@@ -7,6 +7,7 @@ pub mod rollout;
 pub mod seeds;
 pub mod sim;
 pub mod snapshot;
+pub mod sweep;
 pub mod tabular;
 pub mod tasks;
 pub mod train;

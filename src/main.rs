@@ -7,6 +7,7 @@ use cli::bench::BenchCommand;
 use cli::eval::EvalArgs;
 use cli::plot::PlotArgs;
 use cli::rollout::RolloutArgs;
+use cli::sweep::SweepCommand;
 use dhrl::tabular::{TabularArgs, TabularBenchArgs, run_tabular, run_tabular_bench};
 use dhrl::train::TrainArgs;
 
@@ -32,6 +33,10 @@ enum Command {
     Plot(PlotArgs),
     /// Trace one episode from a given state and action sequence, one JSON object per line.
     Rollout(RolloutArgs),
+    /// Experiments as data: plan a grid of runs (the paper's presets or a TOML file), run it
+    /// here or on a cluster, resuming whatever was cut off.
+    #[command(subcommand)]
+    Sweep(SweepCommand),
     /// Measure throughput.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -47,6 +52,7 @@ fn main() -> anyhow::Result<()> {
         Command::Eval(args) => cli::eval::run(&args),
         Command::Plot(args) => cli::plot::run(&args),
         Command::Rollout(args) => cli::rollout::run(&args),
+        Command::Sweep(command) => cli::sweep::run(&command),
         Command::Bench(command) => cli::bench::run(&command),
         Command::Tabular(args) => run_tabular(&args),
         Command::TabularBench(args) => run_tabular_bench(&args),

@@ -131,17 +131,6 @@ fn delayed_sac_and_vdpo_beat_a_random_policy() {
     }
 }
 
-/// The columns of a run's CSV file that a resumed run must reproduce: all but the timings.
-fn reproducible_columns(path: &Path) -> Vec<String> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let header = text.lines().next().unwrap();
-    header
-        .split(',')
-        .filter(|c| !["wall_seconds", "env_steps_per_sec", "updates_per_sec"].contains(c))
-        .map(String::from)
-        .collect()
-}
-
 #[test]
 fn killed_run_resumes_to_the_uninterrupted_run() {
     // augmented-sac: one learner; d2hpg: two learners and the lifting noise in one checkpoint.
@@ -204,7 +193,7 @@ fn killed_run_resumes_to_the_uninterrupted_run() {
         ok(resumed);
 
         for file in ["evals.csv", "train.csv"] {
-            let columns = reproducible_columns(&whole.join(file));
+            let columns = common::reproducible_columns(&whole.join(file));
             assert!(columns.len() >= 4, "{algo} {file}: {columns:?}");
             for name in &columns {
                 assert_eq!(
@@ -317,7 +306,7 @@ fn vdpo_killed_inside_a_cloning_stage_resumes_to_the_uninterrupted_run() {
 
     ok(dhrl(&["train", "--resume", killed.to_str().unwrap()]));
     for file in ["evals.csv", "train.csv"] {
-        for name in reproducible_columns(&whole.join(file)) {
+        for name in common::reproducible_columns(&whole.join(file)) {
             assert_eq!(
                 common::column(&killed.join(file), &name),
                 common::column(&whole.join(file), &name),
@@ -391,7 +380,7 @@ fn every_delayed_algorithm_trains_on_every_task_and_delay_option() {
                 ["10", "20", "30", "40"],
                 "{algo} on {task}"
             );
-            for name in reproducible_columns(&train) {
+            for name in common::reproducible_columns(&train) {
                 // A statistic absent from every update of a row is an empty cell (VDPO's
                 // cloning stage runs every 1,000 steps, not in these 80).
                 for value in common::column(&train, &name) {
@@ -615,7 +604,7 @@ fn training_on_the_gpu_delay_layer_equals_the_cpu_layer() {
         .collect();
     let (cpu, gpu) = (&runs[0], &runs[1]);
     for file in ["evals.csv", "train.csv"] {
-        for name in reproducible_columns(&cpu.join(file)) {
+        for name in common::reproducible_columns(&cpu.join(file)) {
             assert_eq!(
                 common::column(&gpu.join(file), &name),
                 common::column(&cpu.join(file), &name),

@@ -4,4 +4,5 @@ pub mod bench;
 pub mod eval;
 pub mod plot;
 pub mod rollout;
+pub mod sweep;
 pub mod train;

@@ -29,7 +29,11 @@ impl Devices {
             #[cfg(feature = "wgpu-learner")]
             LearnDevice::Wgpu => {
                 let (real, all) = real_gpu_adapters();
-                if real.is_empty() {
+                if !real.is_empty() {
+                    Device::wgpu(burn::prelude::DeviceKind::DefaultDevice)
+                } else if let Some(api) = software_opt_in()? {
+                    software_device(api)?
+                } else {
                     return Err(LearnError::NoRealGpu {
                         found: if all.is_empty() {
                             "none".into()
@@ -38,7 +42,6 @@ impl Devices {
                         },
                     });
                 }
-                Device::wgpu(burn::prelude::DeviceKind::DefaultDevice)
             }
             #[cfg(not(feature = "wgpu-learner"))]
             LearnDevice::Wgpu => return Err(LearnError::WgpuNotBuilt),
@@ -68,4 +71,43 @@ pub fn real_gpu_adapters() -> (Vec<String>, Vec<String>) {
         all.push(name);
     }
     (real, all)
+}
+
+/// The variable that lets `--device wgpu` run burn's kernels on a software adapter (Mesa's
+/// CPU rasterisers): for testing that the wgpu learner computes what the CPU learner does,
+/// never for speed. Its value names the graphics API: `gl` or `vulkan`.
+pub const SOFTWARE_WGPU: &str = "DHRL_WGPU_SOFTWARE";
+
+/// The software graphics API asked for through [`SOFTWARE_WGPU`], if any.
+#[cfg(feature = "wgpu-learner")]
+fn software_opt_in() -> Result<Option<burn::tensor::wgpu::WgpuBackend>, LearnError> {
+    use burn::tensor::wgpu::WgpuBackend;
+    match std::env::var(SOFTWARE_WGPU).as_deref() {
+        Err(_) | Ok("") => Ok(None),
+        Ok("gl") => Ok(Some(WgpuBackend::Gl)),
+        Ok("vulkan") => Ok(Some(WgpuBackend::Vulkan)),
+        Ok(other) => Err(LearnError::SoftwareWgpu(format!(
+            "{SOFTWARE_WGPU}={other} is not a graphics API; accepted: gl, vulkan"
+        ))),
+    }
+}
+
+/// burn's wgpu device on the software adapter of `api`, made once per process (burn's
+/// runtime cannot be set up twice) and cloned after that.
+#[cfg(feature = "wgpu-learner")]
+fn software_device(api: burn::tensor::wgpu::WgpuBackend) -> Result<Device, LearnError> {
+    use std::sync::OnceLock;
+    static DEVICE: OnceLock<Result<Device, String>> = OnceLock::new();
+    let device = DEVICE.get_or_init(|| {
+        eprintln!(
+            "warning: {SOFTWARE_WGPU} is set: burn's wgpu learner runs on a software {api:?} \
+             adapter, for testing only (it is far slower than --device cpu)"
+        );
+        Device::wgpu_options()
+            .device_kind(burn::prelude::DeviceKind::Cpu)
+            .graphics_api(api)
+            .init()
+            .map_err(|e| format!("burn could not start wgpu on a software {api:?} adapter: {e}"))
+    });
+    device.clone().map_err(LearnError::SoftwareWgpu)
 }

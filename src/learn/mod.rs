@@ -10,7 +10,7 @@ mod tensors;
 
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
-pub use device::{Devices, LearnDevice};
+pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};
 pub use losses::{
     actor_loss, critic_loss, critic_target, lifting_loss, polyak, squashed_gaussian_log_prob,
     temperature_loss,
@@ -33,9 +33,12 @@ pub enum LearnError {
     WgpuNotBuilt,
     #[error(
         "--device wgpu needs a real GPU adapter, and wgpu found none (adapters seen: {found}); \
-         burn's generated kernels crash software rasterisers such as Mesa's lavapipe: use --device cpu"
+         use --device cpu, or for testing only set DHRL_WGPU_SOFTWARE=vulkan to run burn's \
+         kernels on a software adapter such as Mesa's lavapipe (far slower than the CPU)"
     )]
     NoRealGpu { found: String },
+    #[error("{0}")]
+    SoftwareWgpu(String),
     #[error("cannot save {what}: {message}")]
     Save { what: String, message: String },
     #[error("cannot load {what}: {message}")]

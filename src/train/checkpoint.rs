@@ -52,6 +52,11 @@ pub fn latest(run: &Path) -> Option<PathBuf> {
         .find(|dir| dir.join("state.json").is_file())
 }
 
+/// Whether `run` holds a checkpoint to resume from.
+pub fn has_checkpoint(run: &Path) -> bool {
+    latest(run).is_some()
+}
+
 fn sync_dir(dir: &Path) -> Result<(), TrainError> {
     File::open(dir)
         .and_then(|d| d.sync_all())

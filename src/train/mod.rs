@@ -11,10 +11,11 @@ mod logs;
 mod run;
 
 pub use args::{TrainArgs, TrainPlan};
+pub use checkpoint::has_checkpoint;
 pub use config::{ConfigError, TrainConfig};
 pub use curves::{CurveSummary, plot_curves, summarize_runs};
 pub use eval::{EvalResult, evaluate};
-pub use run::{Start, TrainSummary, evaluate_saved, learner_pool, train};
+pub use run::{Start, TrainSummary, evaluate_saved, learner_pool, stop_on_signals, train};
 
 use crate::delay::{DelayError, ReplayError};
 use crate::learn::LearnError;
@@ -45,6 +46,11 @@ pub enum TrainError {
     NoCheckpoint(String),
     #[error(transparent)]
     Algo(#[from] crate::algos::AlgoError),
+    #[error(
+        "stopped by a signal at step {env_steps} after writing a checkpoint; continue with \
+         `dhrl train --resume {run}`"
+    )]
+    Interrupted { run: String, env_steps: u64 },
     #[error("the agent reported a statistic `{0}` it did not declare in stat_names")]
     UndeclaredStatistic(&'static str),
 }

@@ -1,5 +1,7 @@
 //! The training loop.
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, LazyLock};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
@@ -107,6 +109,35 @@ pub fn learner_pool(threads: usize) -> Result<rayon::ThreadPool, TrainError> {
             path: "learner threads".into(),
             message: e.to_string(),
         })
+}
+
+/// Set when the process is asked to stop (SIGTERM, SIGINT, SIGUSR1 once
+/// [`stop_on_signals`] is installed): the loop writes a checkpoint at the end of the current
+/// step and returns [`TrainError::Interrupted`].
+static STOP: LazyLock<Arc<AtomicBool>> = LazyLock::new(|| Arc::new(AtomicBool::new(false)));
+
+fn stop_requested() -> bool {
+    STOP.load(Ordering::Relaxed)
+}
+
+/// Makes SIGTERM (a cluster's preemption or time limit), SIGINT (Ctrl-C) and SIGUSR1 (a
+/// cluster's warning before the time limit) stop training at the end of the current step with
+/// a checkpoint, so that `--resume` continues exactly; a second SIGTERM or SIGINT ends the
+/// process at once.
+pub fn stop_on_signals() -> Result<(), TrainError> {
+    use signal_hook::consts::{SIGINT, SIGTERM, SIGUSR1};
+    use signal_hook::flag::{register, register_conditional_shutdown};
+    let failed = |e: std::io::Error| TrainError::Io {
+        path: "signal handlers".into(),
+        message: e.to_string(),
+    };
+    for signal in [SIGTERM, SIGINT] {
+        // Registered first, so it sees the flag as the first signal left it.
+        register_conditional_shutdown(signal, 130, Arc::clone(&STOP)).map_err(failed)?;
+        register(signal, Arc::clone(&STOP)).map_err(failed)?;
+    }
+    register(SIGUSR1, Arc::clone(&STOP)).map_err(failed)?;
+    Ok(())
 }
 
 /// Trains as configured, writing into `run`; with [`Start::Resume`], continues the run saved
@@ -410,6 +441,13 @@ impl Trainer {
             {
                 self.state.checkpoints_done = self.state.env_steps / c.checkpoint_every;
                 self.save_checkpoint()?;
+            } else if stop_requested() {
+                self.save_checkpoint()?;
+                bar.abandon();
+                return Err(TrainError::Interrupted {
+                    run: self.run.display().to_string(),
+                    env_steps: self.state.env_steps,
+                });
             }
             bar.set_position(self.state.env_steps);
         }

@@ -101,3 +101,14 @@ pub fn learn_delayed_pendulum(algo: &str, delay: usize, extra: &[&str]) -> (f64,
     train(&args, &run);
     best_return(&run)
 }
+
+/// The columns of a CSV log that do not depend on timing (all but the wall-clock ones).
+pub fn reproducible_columns(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let header = text.lines().next().unwrap();
+    header
+        .split(',')
+        .filter(|c| !["wall_seconds", "env_steps_per_sec", "updates_per_sec"].contains(c))
+        .map(String::from)
+        .collect()
+}

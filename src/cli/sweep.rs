@@ -1,0 +1,305 @@
+//! `dhrl sweep`: plan an experiment into a sweep folder, then run it here, print one command
+//! per run for another scheduler, or look at where it stands.
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+
+use dhrl::sweep::{
+    EXIT_BUSY, EXIT_INTERRUPTED, Experiment, PRESETS, RunOneResult, RunOutcome, RunState, Sweep,
+    estimate_cost, run_local, run_one, steps_done,
+};
+use dhrl::tasks::TaskName;
+
+#[derive(Subcommand)]
+pub enum SweepCommand {
+    /// Expand an experiment (a preset or a TOML file) into DIR/manifest.jsonl, one line per
+    /// run, and print what it will cost on this machine.
+    Plan(PlanArgs),
+    /// Run every unfinished run of a sweep on this machine, N at a time; kill it and start it
+    /// again at any moment.
+    Run(RunArgs),
+    /// Run (or resume) one run of a sweep, by its manifest index: what every engine calls.
+    RunOne(RunOneArgs),
+    /// One shell command per unfinished run, for GNU parallel, `xargs -P` or `ray job submit`.
+    Commands(DirArgs),
+    /// Where each run of a sweep stands.
+    Status(DirArgs),
+}
+
+#[derive(Args)]
+pub struct PlanArgs {
+    /// A preset (table1, noise, random-delay, ablation, runtime) or an experiment TOML file.
+    experiment: String,
+    /// The sweep folder (created, or extended when it holds an earlier plan).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Multiply every run's steps (and checkpoint interval) by this, for a quick look.
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
+    /// Environment steps of every run (after --scale).
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Only these tasks (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    tasks: Vec<TaskName>,
+    /// Only these algorithms (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    algos: Vec<String>,
+    /// Only these delays (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    delays: Vec<usize>,
+    /// Only these seeds (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    seeds: Vec<u64>,
+    /// Gradient updates timed per (algorithm, task, Δ) for the cost estimate; 0 skips it.
+    #[arg(long, default_value_t = 5)]
+    cost_updates: usize,
+}
+
+#[derive(Args)]
+pub struct RunArgs {
+    dir: PathBuf,
+    /// Runs at a time, each on one core (D2HPG's two learners may use two).
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
+    /// Run failed runs again (by default they stay failed, with their error in status/).
+    #[arg(long)]
+    retry_failed: bool,
+}
+
+#[derive(Args)]
+pub struct RunOneArgs {
+    dir: PathBuf,
+    /// The run's line in the manifest, from 0; $SLURM_ARRAY_TASK_ID when not given.
+    #[arg(long)]
+    index: Option<usize>,
+}
+
+#[derive(Args)]
+pub struct DirArgs {
+    dir: PathBuf,
+}
+
+pub fn run(command: &SweepCommand) -> anyhow::Result<()> {
+    match command {
+        SweepCommand::Plan(args) => plan(args),
+        SweepCommand::Run(args) => run_here(args),
+        SweepCommand::RunOne(args) => run_single(args),
+        SweepCommand::Commands(args) => commands(&args.dir),
+        SweepCommand::Status(args) => status(&args.dir),
+    }
+}
+
+fn load_experiment(source: &str) -> anyhow::Result<Experiment> {
+    if PRESETS.iter().any(|(name, _)| *name == source) {
+        return Ok(Experiment::preset(source)?);
+    }
+    let path = Path::new(source);
+    if !path.is_file() {
+        anyhow::bail!(
+            "'{source}' is neither a preset ({}) nor an experiment file",
+            PRESETS
+                .iter()
+                .map(|(p, _)| *p)
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {source}"))?;
+    Ok(Experiment::from_toml(&text, source)?)
+}
+
+fn plan(args: &PlanArgs) -> anyhow::Result<()> {
+    let mut experiment = load_experiment(&args.experiment)?;
+    experiment.restrict(&args.tasks, &args.algos, &args.delays, &args.seeds);
+    experiment.scale(args.scale)?;
+    if let Some(steps) = args.steps {
+        experiment.steps = steps;
+    }
+    let planned = experiment.expand()?;
+    let (sweep, change) = Sweep::plan(&args.out, &planned)?;
+    std::fs::write(
+        args.out.join("experiment.toml"),
+        toml::to_string(&experiment).context("writing the experiment")?,
+    )
+    .with_context(|| format!("writing {}", args.out.join("experiment.toml").display()))?;
+    if !experiment.description.is_empty() {
+        println!("{}", experiment.description);
+    }
+    println!(
+        "{}: {} runs planned ({} new, {} planned before; {} earlier runs not in this plan, kept)",
+        args.out.display(),
+        planned.len(),
+        change.added,
+        change.kept,
+        change.not_in_plan
+    );
+    let runs: Vec<_> = planned
+        .iter()
+        .filter_map(|p| sweep.runs.iter().find(|r| r.id == p.id))
+        .collect();
+    let steps: u64 = runs.iter().map(|r| r.config.steps).sum();
+    println!("{} runs × steps = {steps} environment steps", runs.len());
+    if args.cost_updates > 0 {
+        println!(
+            "cost at this machine's measured update rates ({} updates timed per algorithm, task and Δ):",
+            args.cost_updates
+        );
+        let rows = estimate_cost(&runs, args.cost_updates)?;
+        println!(
+            "{:<14} {:<18} {:>3} {:>5} {:>10} {:>8} {:>11}",
+            "algorithm", "task", "Δ", "runs", "ms/update", "threads", "core-hours"
+        );
+        for row in &rows {
+            println!(
+                "{:<14} {:<18} {:>3} {:>5} {:>10.2} {:>8} {:>11.1}",
+                row.algo,
+                row.task.to_string(),
+                row.delay,
+                row.runs,
+                row.ms_per_update,
+                row.threads,
+                row.core_hours
+            );
+        }
+        println!(
+            "total: {:.1} core-hours",
+            rows.iter().map(|r| r.core_hours).sum::<f64>()
+        );
+    }
+    println!(
+        "next: dhrl sweep run {0} --jobs N | dhrl sweep commands {0}",
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn run_here(args: &RunArgs) -> anyhow::Result<()> {
+    let sweep = Sweep::open(&args.dir)?;
+    let exe = std::env::current_exe().context("finding the dhrl executable")?;
+    let summary = run_local(
+        &sweep,
+        args.jobs,
+        args.retry_failed,
+        std::io::IsTerminal::is_terminal(&std::io::stderr()),
+        |index, log| {
+            let err = log.try_clone()?;
+            Command::new(&exe)
+                .args(["sweep", "run-one"])
+                .arg(&args.dir)
+                .arg("--index")
+                .arg(index.to_string())
+                .env_remove("SLURM_ARRAY_TASK_ID")
+                .stdin(Stdio::null())
+                .stdout(log)
+                .stderr(err)
+                .spawn()
+        },
+    )?;
+    println!(
+        "{}: {} finished, {} failed, {} interrupted, {} running elsewhere (of {})",
+        args.dir.display(),
+        summary.finished,
+        summary.failed,
+        summary.interrupted,
+        summary.busy,
+        sweep.runs.len()
+    );
+    if summary.failed > 0 {
+        println!(
+            "the failed runs' errors: dhrl sweep status {}",
+            args.dir.display()
+        );
+    }
+    Ok(())
+}
+
+fn run_single(args: &RunOneArgs) -> anyhow::Result<()> {
+    let index = match args.index {
+        Some(index) => index,
+        None => std::env::var("SLURM_ARRAY_TASK_ID")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .context("--index is needed (or SLURM_ARRAY_TASK_ID, inside a Slurm array job)")?,
+    };
+    let sweep = Sweep::open(&args.dir)?;
+    dhrl::train::stop_on_signals()?;
+    let id = sweep.run(index)?.id.clone();
+    match run_one(&sweep, index, false)? {
+        RunOneResult::AlreadyFinished => println!("{id}: finished before"),
+        RunOneResult::Busy => {
+            eprintln!("{id}: another process is running it");
+            std::process::exit(EXIT_BUSY);
+        }
+        RunOneResult::Ended(RunOutcome::Finished {
+            env_steps,
+            wall_seconds,
+            final_return,
+        }) => println!(
+            "{id}: finished, {env_steps} steps in {wall_seconds:.0} s, final return {}",
+            final_return.map_or("-".into(), |r| format!("{r:.1}"))
+        ),
+        RunOneResult::Ended(RunOutcome::Interrupted { env_steps }) => {
+            eprintln!(
+                "{id}: stopped at step {env_steps} with a checkpoint; start it again to resume"
+            );
+            std::process::exit(EXIT_INTERRUPTED);
+        }
+        RunOneResult::Ended(RunOutcome::Failed { error }) => anyhow::bail!("{id}: {error}"),
+    }
+    Ok(())
+}
+
+fn quote(text: &str) -> String {
+    format!("'{}'", text.replace('\'', r"'\''"))
+}
+
+fn commands(dir: &Path) -> anyhow::Result<()> {
+    let sweep = Sweep::open(dir)?;
+    let exe = std::env::current_exe().context("finding the dhrl executable")?;
+    for run in &sweep.runs {
+        if !matches!(
+            sweep.state(run),
+            RunState::Ended(RunOutcome::Finished { .. })
+        ) {
+            println!(
+                "{} sweep run-one {} --index {}",
+                quote(&exe.display().to_string()),
+                quote(&dir.display().to_string()),
+                run.index
+            );
+        }
+    }
+    Ok(())
+}
+
+fn status(dir: &Path) -> anyhow::Result<()> {
+    let sweep = Sweep::open(dir)?;
+    println!(
+        "{:>5}  {:<44} {:<12} {:>17}  final return / error",
+        "index", "id", "state", "steps"
+    );
+    for run in &sweep.runs {
+        let state = sweep.state(run);
+        let (name, detail) = match &state {
+            RunState::Pending => ("pending", String::new()),
+            RunState::Started => ("started", String::new()),
+            RunState::Ended(RunOutcome::Finished { final_return, .. }) => (
+                "finished",
+                final_return.map_or(String::new(), |r| format!("{r:.1}")),
+            ),
+            RunState::Ended(RunOutcome::Interrupted { .. }) => ("interrupted", String::new()),
+            RunState::Ended(RunOutcome::Failed { error }) => ("failed", error.clone()),
+        };
+        println!(
+            "{:>5}  {:<44} {:<12} {:>17}  {detail}",
+            run.index,
+            run.id,
+            name,
+            format!("{}/{}", steps_done(&sweep, run), run.config.steps)
+        );
+    }
+    Ok(())
+}

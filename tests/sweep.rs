@@ -1,0 +1,284 @@
+//! Sweeps: experiments expand into manifests with stable run ids, the local runner finishes
+//! every run and picks up where a killed sweep stopped, and a run stopped by a signal leaves
+//! a checkpoint that resumes to the uninterrupted result.
+mod common;
+
+use std::os::unix::process::CommandExt;
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use dhrl::sweep::{Experiment, RunOutcome, RunState, Sweep};
+
+fn dhrl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A small experiment: InvertedPendulum, two algorithms, Δ 2, two seeds, a few hundred steps.
+const TINY: &str = r#"
+tasks = ["inverted-pendulum"]
+algorithms = ["sac", "bpql"]
+delays = [2]
+seeds = [0, 1]
+steps = 600
+
+[train]
+warmup_steps = 200
+eval_every = 300
+eval_episodes = 2
+checkpoint_every = 200
+batch_size = 32
+log_every = 100
+"#;
+
+#[test]
+fn presets_expand_into_the_papers_grid_with_stable_ids() {
+    let table1 = Experiment::preset("table1").unwrap().expand().unwrap();
+    // 6 tasks × (delay-free SAC once + 6 delayed algorithms × 3 delays) × 5 seeds.
+    assert_eq!(table1.len(), 6 * (1 + 6 * 3) * 5);
+    let mut ids: Vec<&str> = table1.iter().map(|r| r.id.as_str()).collect();
+    ids.sort();
+    ids.dedup();
+    assert_eq!(ids.len(), table1.len(), "run ids are unique");
+    assert!(
+        table1
+            .iter()
+            .filter(|r| r.config.algo.name() == "sac")
+            .all(|r| r.config.delay.observation_delay == 0),
+        "the delay-free reference runs undelayed"
+    );
+    assert!(
+        table1
+            .iter()
+            .all(|r| r.config.steps == 1_000_000 && r.config.eval_every == 5_000)
+    );
+    let noise = Experiment::preset("noise").unwrap().expand().unwrap();
+    assert_eq!(
+        noise.len(),
+        6 * 5 * 5,
+        "6 tasks × σ ∈ {{0, .01, .03, .05, .07}} × 5 seeds"
+    );
+    let random = Experiment::preset("random-delay")
+        .unwrap()
+        .expand()
+        .unwrap();
+    assert_eq!(
+        random
+            .iter()
+            .filter(|r| r.config.delay.random_bound() == Some(10))
+            .count(),
+        30
+    );
+    // The same plan twice gives the same ids; a changed setting gives new ones.
+    let again = Experiment::preset("table1").unwrap().expand().unwrap();
+    assert_eq!(table1, again);
+    let mut changed = Experiment::preset("ablation").unwrap();
+    let before = changed.expand().unwrap();
+    changed.algo.insert(
+        "d2hpg".into(),
+        toml::from_str("lifting_weight = 10.0").unwrap(),
+    );
+    let after = changed.expand().unwrap();
+    for (b, a) in before.iter().zip(&after) {
+        assert_eq!(
+            b.id == a.id,
+            b.config.algo.name() != "d2hpg",
+            "{} / {}",
+            b.id,
+            a.id
+        );
+    }
+}
+
+#[test]
+fn bad_experiments_are_clear_errors() {
+    let error = |text: &str| {
+        Experiment::from_toml(text, "x.toml")
+            .and_then(|e| e.expand())
+            .unwrap_err()
+            .to_string()
+    };
+    let base = |extra: &str| TINY.replace("steps = 600", &format!("steps = 600\n{extra}"));
+    assert!(
+        error(&TINY.replace("\"bpql\"", "\"bqpl\"")).contains("d2hpg"),
+        "an unknown algorithm lists the valid ones"
+    );
+    assert!(error(&base("stepz = 3")).contains("stepz"));
+    assert!(error(&TINY.replace("seeds = [0, 1]", "seeds = []")).contains("`seeds` list is empty"));
+    assert!(error(&format!("{TINY}\n[algo.vdpo]\ndropout = 0.2\n")).contains("does not run"));
+    assert!(error(&TINY.replace("batch_size = 32", "batch_sise = 32")).contains("batch_sise"));
+    let out = dhrl(&["sweep", "plan", "tabel1", "--out", "/nonexistent/x"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("table1, noise, random-delay"));
+}
+
+fn plan_tiny(dir: &Path) -> Sweep {
+    let file = dir.join("tiny.toml");
+    std::fs::write(&file, TINY).unwrap();
+    let sweep = dir.join("sweep");
+    let args = [
+        "sweep",
+        "plan",
+        file.to_str().unwrap(),
+        "--out",
+        sweep.to_str().unwrap(),
+        "--cost-updates",
+        "0",
+    ];
+    let printed = ok(&dhrl(&args));
+    assert!(printed.contains("4 runs planned (4 new"), "{printed}");
+    // Planning again adds nothing and moves nothing.
+    let printed = ok(&dhrl(&args));
+    assert!(printed.contains("(0 new, 4 planned before"), "{printed}");
+    Sweep::open(&sweep).unwrap()
+}
+
+fn finished_return(sweep: &Sweep, index: usize) -> f64 {
+    match sweep.state(&sweep.runs[index]) {
+        RunState::Ended(RunOutcome::Finished { final_return, .. }) => final_return.unwrap(),
+        other => panic!("run {index}: {other:?}"),
+    }
+}
+
+/// Every non-timing column of both logs of a sweep's run equals those of `reference`.
+fn assert_same_logs(run: &Path, reference: &Path) {
+    for file in ["evals.csv", "train.csv"] {
+        for name in common::reproducible_columns(&reference.join(file)) {
+            assert_eq!(
+                common::column(&run.join(file), &name),
+                common::column(&reference.join(file), &name),
+                "{}: {file} column {name}",
+                run.display()
+            );
+        }
+    }
+}
+
+#[test]
+fn local_runner_finishes_every_run_and_a_killed_sweep_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = plan_tiny(dir.path());
+    let folder = sweep.dir.to_str().unwrap().to_string();
+    // Start the sweep, kill it (runner and runs) once the first checkpoints exist, start again.
+    let mut runner = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(["sweep", "run", &folder, "--jobs", "2"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .process_group(0)
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !sweep
+        .runs
+        .iter()
+        .any(|r| sweep.run_dir(r).join("checkpoint").exists())
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no checkpoint within 2 min"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let group = runner.id() as i32;
+    Command::new("kill")
+        .args(["-s", "KILL", "--", &format!("-{group}")])
+        .status()
+        .unwrap();
+    runner.wait().unwrap();
+    let cut = sweep
+        .runs
+        .iter()
+        .filter(|r| !matches!(sweep.state(r), RunState::Ended(RunOutcome::Finished { .. })))
+        .count();
+    assert!(cut > 0, "the kill came after every run had finished");
+    let printed = ok(&dhrl(&["sweep", "run", &folder, "--jobs", "2"]));
+    assert!(printed.contains("4 finished, 0 failed"), "{printed}");
+    // Each run equals the same configuration trained in one go by `dhrl train`.
+    for run in &sweep.runs {
+        let whole = dir.path().join(format!("whole-{}", run.index));
+        std::fs::write(
+            dir.path().join("config.toml"),
+            toml::to_string(&run.config).unwrap(),
+        )
+        .unwrap();
+        common::train(
+            &["--config", dir.path().join("config.toml").to_str().unwrap()],
+            &whole,
+        );
+        assert_same_logs(&sweep.run_dir(run), &whole);
+        assert!(finished_return(&sweep, run.index).is_finite());
+    }
+    // Nothing left to do: a second start runs nothing.
+    let printed = ok(&dhrl(&["sweep", "run", &folder]));
+    assert!(printed.contains("4 finished, 0 failed"), "{printed}");
+    let commands = ok(&dhrl(&["sweep", "commands", &folder]));
+    assert!(
+        commands.is_empty(),
+        "finished runs need no command: {commands}"
+    );
+}
+
+#[test]
+fn a_run_stopped_by_sigterm_checkpoints_and_resumes_to_the_same_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = plan_tiny(dir.path());
+    let folder = sweep.dir.to_str().unwrap().to_string();
+    let commands = ok(&dhrl(&["sweep", "commands", &folder]));
+    assert_eq!(commands.lines().count(), 4, "{commands}");
+    assert!(commands.lines().all(|l| l.contains("sweep run-one")));
+    let run = &sweep.runs[1];
+    let child = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(["sweep", "run-one", &folder, "--index", "1"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let train_log = sweep.run_dir(run).join("train.csv");
+    let start = Instant::now();
+    while !std::fs::read_to_string(&train_log).is_ok_and(|t| t.lines().count() >= 2) {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no log row within 2 min"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(dhrl::sweep::EXIT_INTERRUPTED),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let RunState::Ended(RunOutcome::Interrupted { env_steps }) = sweep.state(run) else {
+        panic!("{:?}", sweep.state(run));
+    };
+    assert!(env_steps < run.config.steps, "stopped at {env_steps}");
+    ok(&dhrl(&["sweep", "run-one", &folder, "--index", "1"]));
+    let whole = dir.path().join("whole");
+    std::fs::write(
+        dir.path().join("config.toml"),
+        toml::to_string(&run.config).unwrap(),
+    )
+    .unwrap();
+    common::train(
+        &["--config", dir.path().join("config.toml").to_str().unwrap()],
+        &whole,
+    );
+    assert_same_logs(&sweep.run_dir(run), &whole);
+}
