@@ -3,12 +3,11 @@
 //! a checkpoint that resumes to the uninterrupted result.
 mod common;
 
-use std::os::unix::process::CommandExt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use dhrl::sweep::{Experiment, RunOutcome, RunState, Sweep};
+use dhrl::sweep::{Experiment, ManifestRun, RunOutcome, RunState, Sweep};
 
 fn dhrl(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_dhrl"))
@@ -152,6 +151,15 @@ fn finished_return(sweep: &Sweep, index: usize) -> f64 {
     }
 }
 
+/// The run's configuration trained by `dhrl train` without interruption, in `dir/whole-<index>`.
+fn train_in_one_go(dir: &Path, run: &ManifestRun) -> PathBuf {
+    let config = dir.join(format!("config-{}.toml", run.index));
+    std::fs::write(&config, toml::to_string(&run.config).unwrap()).unwrap();
+    let whole = dir.join(format!("whole-{}", run.index));
+    common::train(&["--config", config.to_str().unwrap()], &whole);
+    whole
+}
+
 /// Every non-timing column of both logs of a sweep's run equals those of `reference`.
 fn assert_same_logs(run: &Path, reference: &Path) {
     for file in ["evals.csv", "train.csv"] {
@@ -171,12 +179,12 @@ fn local_runner_finishes_every_run_and_a_killed_sweep_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let sweep = plan_tiny(dir.path());
     let folder = sweep.dir.to_str().unwrap().to_string();
-    // Start the sweep, kill it (runner and runs) once the first checkpoints exist, start again.
+    // Start the sweep, kill it (runner and runs, which have their own process groups) once
+    // the first checkpoints exist, start it again.
     let mut runner = Command::new(env!("CARGO_BIN_EXE_dhrl"))
         .args(["sweep", "run", &folder, "--jobs", "2"])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
-        .process_group(0)
         .spawn()
         .unwrap();
     let start = Instant::now();
@@ -191,9 +199,9 @@ fn local_runner_finishes_every_run_and_a_killed_sweep_resumes() {
         );
         std::thread::sleep(Duration::from_millis(20));
     }
-    let group = runner.id() as i32;
-    Command::new("kill")
-        .args(["-s", "KILL", "--", &format!("-{group}")])
+    // Every process whose command line names this sweep's (temporary, unique) folder.
+    Command::new("pkill")
+        .args(["-KILL", "-f", &folder])
         .status()
         .unwrap();
     runner.wait().unwrap();
@@ -207,16 +215,7 @@ fn local_runner_finishes_every_run_and_a_killed_sweep_resumes() {
     assert!(printed.contains("4 finished, 0 failed"), "{printed}");
     // Each run equals the same configuration trained in one go by `dhrl train`.
     for run in &sweep.runs {
-        let whole = dir.path().join(format!("whole-{}", run.index));
-        std::fs::write(
-            dir.path().join("config.toml"),
-            toml::to_string(&run.config).unwrap(),
-        )
-        .unwrap();
-        common::train(
-            &["--config", dir.path().join("config.toml").to_str().unwrap()],
-            &whole,
-        );
+        let whole = train_in_one_go(dir.path(), run);
         assert_same_logs(&sweep.run_dir(run), &whole);
         assert!(finished_return(&sweep, run.index).is_finite());
     }
@@ -245,12 +244,12 @@ fn a_run_stopped_by_sigterm_checkpoints_and_resumes_to_the_same_result() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let train_log = sweep.run_dir(run).join("train.csv");
+    let checkpoint = sweep.run_dir(run).join("checkpoint");
     let start = Instant::now();
-    while !std::fs::read_to_string(&train_log).is_ok_and(|t| t.lines().count() >= 2) {
+    while !checkpoint.exists() {
         assert!(
             start.elapsed() < Duration::from_secs(120),
-            "no log row within 2 min"
+            "no checkpoint within 2 min"
         );
         std::thread::sleep(Duration::from_millis(10));
     }
@@ -270,15 +269,60 @@ fn a_run_stopped_by_sigterm_checkpoints_and_resumes_to_the_same_result() {
     };
     assert!(env_steps < run.config.steps, "stopped at {env_steps}");
     ok(&dhrl(&["sweep", "run-one", &folder, "--index", "1"]));
-    let whole = dir.path().join("whole");
-    std::fs::write(
-        dir.path().join("config.toml"),
-        toml::to_string(&run.config).unwrap(),
-    )
-    .unwrap();
-    common::train(
-        &["--config", dir.path().join("config.toml").to_str().unwrap()],
-        &whole,
-    );
+    let whole = train_in_one_go(dir.path(), run);
     assert_same_logs(&sweep.run_dir(run), &whole);
+}
+
+#[test]
+fn a_runner_stopped_by_sigterm_stops_its_runs_with_checkpoints() {
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = plan_tiny(dir.path());
+    let folder = sweep.dir.to_str().unwrap().to_string();
+    let runner = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(["sweep", "run", &folder, "--jobs", "2"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !sweep
+        .runs
+        .iter()
+        .any(|r| sweep.run_dir(r).join("checkpoint").exists())
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no checkpoint within 2 min"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Command::new("kill")
+        .args(["-TERM", &runner.id().to_string()])
+        .status()
+        .unwrap();
+    let out = runner.wait_with_output().unwrap();
+    let printed = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(dhrl::sweep::EXIT_INTERRUPTED),
+        "{printed}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stopped: Vec<_> = sweep
+        .runs
+        .iter()
+        .filter(|r| {
+            matches!(
+                sweep.state(r),
+                RunState::Ended(RunOutcome::Interrupted { .. })
+            )
+        })
+        .collect();
+    assert!(!stopped.is_empty(), "no run was stopped: {printed}");
+    let printed = ok(&dhrl(&["sweep", "run", &folder, "--jobs", "2"]));
+    assert!(printed.contains("4 finished, 0 failed"), "{printed}");
+    for run in stopped {
+        let whole = train_in_one_go(dir.path(), run);
+        assert_same_logs(&sweep.run_dir(run), &whole);
+    }
 }

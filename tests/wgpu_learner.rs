@@ -51,6 +51,17 @@ fn close(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol * a.abs().max(1.0)
 }
 
+/// Both action lists agree entry by entry to [`close`]'s 1e-3.
+fn assert_actions_close(a: &[f32], b: &[f32], what: &str) {
+    assert_eq!(a.len(), b.len(), "{what}: {a:?} vs {b:?}");
+    assert!(
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| close(f64::from(*x), f64::from(*y), 1e-3)),
+        "{what}: {a:?} vs {b:?}"
+    );
+}
+
 /// The same agent on both devices (the CPU one's networks, optimisers and noise saved and
 /// loaded onto the GPU), the same batches: the losses of every update, the deterministic and
 /// sampled actions afterwards agree within 1e-3 (relative, or absolute below 1): the devices
@@ -109,23 +120,17 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
             (16 * 2, 16 * 2),
             "{algo}: one action per state"
         );
-        for (x, y) in a.iter().zip(&b) {
-            assert!(
-                close(f64::from(*x), f64::from(*y), 1e-3),
-                "{algo}: action {x} on CPU, {y} on wgpu"
-            );
-        }
+        assert_actions_close(
+            &a,
+            &b,
+            &format!("{algo}: deterministic actions on CPU, on wgpu"),
+        );
         // Sampled actions: the noise is drawn on the host from the stream both agents carry.
         let (a, b) = (
             on_cpu.act(&probe.augmented, 16, ActMode::Explore),
             on_gpu.act(&probe.augmented, 16, ActMode::Explore),
         );
-        assert!(
-            a.iter()
-                .zip(&b)
-                .all(|(x, y)| close(f64::from(*x), f64::from(*y), 1e-3)),
-            "{algo}: sampled actions {a:?} on CPU, {b:?} on wgpu"
-        );
+        assert_actions_close(&a, &b, &format!("{algo}: sampled actions on CPU, on wgpu"));
         // Saved on wgpu, loaded on the CPU: the same policy.
         let from_gpu = tempfile::tempdir().unwrap();
         on_gpu.save(from_gpu.path()).unwrap();
@@ -135,11 +140,10 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
             on_gpu.act(&probe.augmented, 16, ActMode::Deterministic),
             reloaded.act(&probe.augmented, 16, ActMode::Deterministic),
         );
-        assert!(
-            a.iter()
-                .zip(&b)
-                .all(|(x, y)| close(f64::from(*x), f64::from(*y), 1e-3)),
-            "{algo}: the wgpu agent acts {a:?}, saved and loaded on the CPU {b:?}"
+        assert_actions_close(
+            &a,
+            &b,
+            &format!("{algo}: actions on wgpu, saved and loaded on the CPU"),
         );
         let learns_delay_free = settings.info().delay_free_policy;
         let (reference, free) = (
@@ -153,11 +157,10 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
         );
         if let (Some(reference), Some(free)) = (reference, free) {
             assert_eq!((reference.len(), free.len()), (16 * 2, 16 * 2));
-            assert!(
-                free.iter()
-                    .zip(&reference)
-                    .all(|(y, x)| close(f64::from(*x), f64::from(*y), 1e-3)),
-                "{algo}: delay-free actions {reference:?} on CPU, {free:?} on wgpu"
+            assert_actions_close(
+                &reference,
+                &free,
+                &format!("{algo}: delay-free actions on CPU, on wgpu"),
             );
         }
     }

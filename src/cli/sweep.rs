@@ -1,14 +1,18 @@
 //! `dhrl sweep`: plan an experiment into a sweep folder, then run it here, print one command
 //! per run for another scheduler, or look at where it stands.
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
+use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
 
 use dhrl::sweep::{
     EXIT_BUSY, EXIT_INTERRUPTED, Experiment, PRESETS, RunOneResult, RunOutcome, RunState, Sweep,
-    estimate_cost, run_local, run_one, steps_done,
+    estimate_cost, run_local, run_one, steps_done, write_atomically,
 };
 use dhrl::tasks::TaskName;
 
@@ -41,16 +45,16 @@ pub struct PlanArgs {
     /// Environment steps of every run (after --scale).
     #[arg(long)]
     steps: Option<u64>,
-    /// Only these tasks (comma-separated).
+    /// These tasks instead of the experiment's (comma-separated).
     #[arg(long, value_enum, value_delimiter = ',')]
     tasks: Vec<TaskName>,
-    /// Only these algorithms (comma-separated).
+    /// These algorithms instead of the experiment's (comma-separated).
     #[arg(long, value_delimiter = ',')]
     algos: Vec<String>,
-    /// Only these delays (comma-separated).
+    /// These delays instead of the experiment's (comma-separated).
     #[arg(long, value_delimiter = ',')]
     delays: Vec<usize>,
-    /// Only these seeds (comma-separated).
+    /// These seeds instead of the experiment's (comma-separated).
     #[arg(long, value_delimiter = ',')]
     seeds: Vec<u64>,
     /// Gradient updates timed per (algorithm, task, Δ) for the cost estimate; 0 skips it.
@@ -120,11 +124,11 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     }
     let planned = experiment.expand()?;
     let (sweep, change) = Sweep::plan(&args.out, &planned)?;
-    std::fs::write(
-        args.out.join("experiment.toml"),
-        toml::to_string(&experiment).context("writing the experiment")?,
-    )
-    .with_context(|| format!("writing {}", args.out.join("experiment.toml").display()))?;
+    // The experiment as last planned (earlier plans' runs stay in the manifest).
+    write_atomically(
+        &args.out.join("experiment.toml"),
+        &toml::to_string(&experiment).context("writing the experiment")?,
+    )?;
     if !experiment.description.is_empty() {
         println!("{}", experiment.description);
     }
@@ -136,6 +140,14 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
         change.kept,
         change.not_in_plan
     );
+    if change.like_earlier > 0 {
+        eprintln!(
+            "warning: {} new runs share task, algorithm, delay and seed with earlier runs of this \
+             sweep but differ in configuration (a changed setting, or a dhrl that resolves more \
+             fields): they run beside the earlier ones",
+            change.like_earlier
+        );
+    }
     let runs: Vec<_> = planned
         .iter()
         .filter_map(|p| sweep.runs.iter().find(|r| r.id == p.id))
@@ -179,11 +191,19 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
 fn run_here(args: &RunArgs) -> anyhow::Result<()> {
     let sweep = Sweep::open(&args.dir)?;
     let exe = std::env::current_exe().context("finding the dhrl executable")?;
+    // The runner's own SIGTERM, SIGINT (Ctrl-C) or SIGHUP: its runs checkpoint and exit. Each
+    // run has its own process group, so that it hears only the runner's one SIGTERM.
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [SIGTERM, SIGINT, SIGHUP] {
+        signal_hook::flag::register(signal, Arc::clone(&stop))
+            .context("installing the runner's signal handlers")?;
+    }
     let summary = run_local(
         &sweep,
         args.jobs,
         args.retry_failed,
         std::io::IsTerminal::is_terminal(&std::io::stderr()),
+        &stop,
         |index, log| {
             let err = log.try_clone()?;
             Command::new(&exe)
@@ -195,6 +215,7 @@ fn run_here(args: &RunArgs) -> anyhow::Result<()> {
                 .stdin(Stdio::null())
                 .stdout(log)
                 .stderr(err)
+                .process_group(0)
                 .spawn()
         },
     )?;
@@ -209,9 +230,12 @@ fn run_here(args: &RunArgs) -> anyhow::Result<()> {
     );
     if summary.failed > 0 {
         println!(
-            "the failed runs' errors: dhrl sweep status {}",
+            "the failed runs' errors: dhrl sweep status {} (--retry-failed runs them again)",
             args.dir.display()
         );
+    }
+    if stop.load(Ordering::Relaxed) {
+        std::process::exit(EXIT_INTERRUPTED);
     }
     Ok(())
 }
@@ -259,26 +283,30 @@ fn quote(text: &str) -> String {
 fn commands(dir: &Path) -> anyhow::Result<()> {
     let sweep = Sweep::open(dir)?;
     let exe = std::env::current_exe().context("finding the dhrl executable")?;
+    let dir = dir
+        .canonicalize()
+        .with_context(|| format!("resolving {}", dir.display()))?;
+    let mut out = String::new();
     for run in &sweep.runs {
         if !matches!(
             sweep.state(run),
             RunState::Ended(RunOutcome::Finished { .. })
         ) {
-            println!(
-                "{} sweep run-one {} --index {}",
+            out += &format!(
+                "{} sweep run-one {} --index {}\n",
                 quote(&exe.display().to_string()),
                 quote(&dir.display().to_string()),
                 run.index
             );
         }
     }
-    Ok(())
+    print_all(&out)
 }
 
 fn status(dir: &Path) -> anyhow::Result<()> {
     let sweep = Sweep::open(dir)?;
-    println!(
-        "{:>5}  {:<44} {:<12} {:>17}  final return / error",
+    let mut out = format!(
+        "{:>5}  {:<56} {:<12} {:>17}  final return / error\n",
         "index", "id", "state", "steps"
     );
     for run in &sweep.runs {
@@ -293,13 +321,26 @@ fn status(dir: &Path) -> anyhow::Result<()> {
             RunState::Ended(RunOutcome::Interrupted { .. }) => ("interrupted", String::new()),
             RunState::Ended(RunOutcome::Failed { error }) => ("failed", error.clone()),
         };
-        println!(
-            "{:>5}  {:<44} {:<12} {:>17}  {detail}",
+        out += &format!(
+            "{:>5}  {:<56} {:<12} {:>17}  {detail}\n",
             run.index,
             run.id,
             name,
             format!("{}/{}", steps_done(&sweep, run), run.config.steps)
         );
     }
-    Ok(())
+    print_all(&out)
+}
+
+/// Writes `text` to stdout; a reader that stops early (`| head`) is not an error.
+fn print_all(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        result => result.context("writing to stdout"),
+    }
 }

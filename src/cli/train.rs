@@ -7,6 +7,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let plan = args.plan()?;
+    dhrl::train::stop_on_signals()?;
     eprintln!("run folder: {}", plan.run.display());
     let summary = train(
         &plan.config,

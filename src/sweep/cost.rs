@@ -12,6 +12,9 @@ use crate::tasks::TaskName;
 #[derive(Debug, Clone, Serialize)]
 pub struct CostRow {
     pub algo: String,
+    /// The algorithm's whole configuration, the batch size and the device timed.
+    #[serde(skip)]
+    settings: String,
     pub task: TaskName,
     pub delay: usize,
     pub runs: usize,
@@ -30,12 +33,13 @@ pub fn estimate_cost(runs: &[&ManifestRun], updates: usize) -> Result<Vec<CostRo
     for run in runs {
         let c = &run.config;
         let delay = c.validate()?;
-        let key = (c.algo.name(), c.task, delay);
+        // Runs with other network sizes, batch or device are timed apart.
+        let settings = format!("{:?} {} {:?}", c.algo, c.batch_size, c.device);
         let updates_of_run =
             (c.steps.saturating_sub(c.warmup_steps) as f64 * c.updates_per_step) as u64;
         if let Some(row) = rows
             .iter_mut()
-            .find(|r| (r.algo.as_str(), r.task, r.delay) == key)
+            .find(|r| (r.settings.as_str(), r.task, r.delay) == (settings.as_str(), c.task, delay))
         {
             row.runs += 1;
             row.env_steps += c.steps;
@@ -53,6 +57,7 @@ pub fn estimate_cost(runs: &[&ManifestRun], updates: usize) -> Result<Vec<CostRo
         )?;
         rows.push(CostRow {
             algo: c.algo.name().to_string(),
+            settings,
             task: c.task,
             delay,
             runs: 1,

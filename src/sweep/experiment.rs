@@ -157,6 +157,13 @@ impl Experiment {
                 }
             }
         }
+        if runs.is_empty() {
+            return Err(SweepError::Invalid(
+                "the experiment expands into no runs (are its delays all 0 with algorithms that \
+                 need a delay?)"
+                    .into(),
+            ));
+        }
         Ok(runs)
     }
 
@@ -238,6 +245,21 @@ fn base_config(train: &toml::Table) -> Result<TrainConfig, SweepError> {
         if train.contains_key(field) {
             return Err(SweepError::Invalid(format!(
                 "[train] sets `{field}`, which the experiment's own lists decide"
+            )));
+        }
+    }
+    if let Some(toml::Value::Table(delay)) = train.get("delay") {
+        let decided = [
+            "observation_delay",
+            "action_delay",
+            "random_delay",
+            "max_random_delay",
+            "actuator_noise",
+        ];
+        if let Some(field) = decided.iter().find(|f| delay.contains_key(**f)) {
+            return Err(SweepError::Invalid(format!(
+                "[train.delay] sets `{field}`, which the experiment's `delays`, `delay_kinds` and \
+                 `actuator_noise` decide; [train.delay] takes only `warmup`"
             )));
         }
     }

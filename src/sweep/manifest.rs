@@ -64,6 +64,14 @@ pub struct PlanChange {
     pub kept: usize,
     /// Runs of an earlier plan that this one does not name (kept, never deleted).
     pub not_in_plan: usize,
+    /// New runs named like an earlier one but for the configuration hash: a setting changed
+    /// (or a newer dhrl resolves more fields), so they run beside the earlier ones.
+    pub like_earlier: usize,
+}
+
+/// An id without its configuration hash: what a run is, not exactly how it is configured.
+fn readable_part(id: &str) -> &str {
+    id.rsplit_once('-').map_or(id, |(readable, _)| readable)
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> SweepError + '_ {
@@ -75,7 +83,7 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> SweepError + '_ {
 
 /// Writes `text` to `path` through a temporary file and a rename, so readers see the old
 /// file or the new one, never a part.
-pub(super) fn write_atomically(path: &Path, text: &str) -> Result<(), SweepError> {
+pub fn write_atomically(path: &Path, text: &str) -> Result<(), SweepError> {
     let partial = path.with_extension("partial");
     std::fs::write(&partial, text).map_err(io(&partial))?;
     std::fs::File::open(&partial)
@@ -152,6 +160,14 @@ impl Sweep {
             }
         }
         let added = sweep.runs.len() - before;
+        let like_earlier = sweep.runs[before..]
+            .iter()
+            .filter(|new| {
+                sweep.runs[..before]
+                    .iter()
+                    .any(|old| readable_part(&old.id) == readable_part(&new.id))
+            })
+            .count();
         let text: String = sweep
             .runs
             .iter()
@@ -164,6 +180,7 @@ impl Sweep {
                 added,
                 kept,
                 not_in_plan: before - kept,
+                like_earlier,
             },
         ))
     }

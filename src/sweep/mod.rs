@@ -10,7 +10,7 @@ mod runner;
 
 pub use cost::{CostRow, estimate_cost};
 pub use experiment::{DelayKind, Experiment, PRESETS, PlannedRun, run_id};
-pub use manifest::{ManifestRun, PlanChange, RunOutcome, RunState, Sweep};
+pub use manifest::{ManifestRun, PlanChange, RunOutcome, RunState, Sweep, write_atomically};
 pub use runner::{
     EXIT_BUSY, EXIT_INTERRUPTED, LocalSummary, RunOneResult, run_local, run_one, steps_done,
 };

@@ -4,7 +4,8 @@ use std::collections::VecDeque;
 use std::fs::File;
 use std::path::Path;
 use std::process::Child;
-use std::time::{Duration, Instant};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -28,33 +29,40 @@ pub enum RunOneResult {
 }
 
 /// Runs (or resumes) the run at `index` in this process: nothing if it finished before; a
-/// fresh start if it has no checkpoint (a folder without one holds nothing a resume could
-/// use); otherwise a resume from its checkpoint. The outcome is recorded in the sweep folder.
-/// A lock file keeps two processes from running the same run.
+/// fresh start if it has no checkpoint (a folder without one holds only the logs of its first
+/// steps: it is moved aside to `runs/<id>.without-checkpoint`); otherwise a resume from its
+/// checkpoint. The outcome is recorded in the sweep folder. A lock file keeps two processes
+/// from running the same run.
 pub fn run_one(sweep: &Sweep, index: usize, progress: bool) -> Result<RunOneResult, SweepError> {
     let run = sweep.run(index)?;
-    if let RunState::Ended(RunOutcome::Finished { .. }) = sweep.state(run) {
+    if finished(sweep, run) {
         return Ok(RunOneResult::AlreadyFinished);
     }
     let Some(_lock) = lock(sweep, run)? else {
         return Ok(RunOneResult::Busy);
     };
+    // Another process may have finished it between the look above and the lock.
+    if finished(sweep, run) {
+        return Ok(RunOneResult::AlreadyFinished);
+    }
     sweep.clear_outcome(run)?;
     let dir = sweep.run_dir(run);
+    let io = |path: &Path| {
+        let path = path.display().to_string();
+        move |e: std::io::Error| SweepError::Io {
+            path,
+            message: e.to_string(),
+        }
+    };
     let start = if has_checkpoint(&dir) {
         Start::Resume
     } else {
         if dir.exists() {
-            std::fs::remove_dir_all(&dir).map_err(|e| SweepError::Io {
-                path: dir.display().to_string(),
-                message: e.to_string(),
-            })?;
-        }
-        if let Some(parent) = dir.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| SweepError::Io {
-                path: parent.display().to_string(),
-                message: e.to_string(),
-            })?;
+            let aside = dir.with_extension("without-checkpoint");
+            if aside.exists() {
+                std::fs::remove_dir_all(&aside).map_err(io(&aside))?;
+            }
+            std::fs::rename(&dir, &aside).map_err(io(&dir))?;
         }
         Start::Fresh
     };
@@ -73,12 +81,22 @@ pub fn run_one(sweep: &Sweep, index: usize, progress: bool) -> Result<RunOneResu
     Ok(RunOneResult::Ended(outcome))
 }
 
+fn finished(sweep: &Sweep, run: &ManifestRun) -> bool {
+    matches!(
+        sweep.state(run),
+        RunState::Ended(RunOutcome::Finished { .. })
+    )
+}
+
 /// An exclusive lock on `runs/<id>.lock`, or `None` when another process holds it.
 fn lock(sweep: &Sweep, run: &ManifestRun) -> Result<Option<File>, SweepError> {
     let path = sweep.dir.join("runs").join(format!("{}.lock", run.id));
     let io = |e: std::io::Error| SweepError::Io {
         path: path.display().to_string(),
-        message: e.to_string(),
+        message: format!(
+            "{e} (runs are locked with flock: the sweep folder must be on a filesystem that \
+             supports it; NFS needs lockd, Lustre the flock mount option)"
+        ),
     };
     std::fs::create_dir_all(sweep.dir.join("runs")).map_err(io)?;
     let file = File::options()
@@ -99,34 +117,48 @@ fn lock(sweep: &Sweep, run: &ManifestRun) -> Result<Option<File>, SweepError> {
 pub struct LocalSummary {
     pub finished: usize,
     pub failed: usize,
+    /// Stopped with a checkpoint (by a signal, or by this runner's own stop): the next start
+    /// resumes them.
     pub interrupted: usize,
-    /// Held by another process (another runner, a Slurm task) when this one came to them.
+    /// Held by another process (another runner, a Slurm task) whenever this one tried them.
     pub busy: usize,
 }
 
+/// How often the runner looks at its children, and how often it retries a run another
+/// process holds before leaving it to that process.
+const TICK: Duration = Duration::from_millis(500);
+const BUSY_RETRIES: u32 = 10;
+
 /// Runs every run of `sweep` that has not finished, `jobs` at a time, each in a child process
 /// from `spawn(index, log)` (which runs [`run_one`] with its output into `log`). Failed runs
-/// are recorded and skipped unless `retry_failed`; one failure never stops the others. The
-/// sweep can be killed at any moment: started again, it resumes the cut runs.
+/// are recorded and skipped unless `retry_failed`; one failure never stops the others. When
+/// `stop` becomes true (the runner's own SIGTERM, SIGINT or SIGHUP), no run is started any
+/// more, the running ones get SIGTERM (they checkpoint and exit) and the runner waits for
+/// them. Killed outright, the sweep resumes its cut runs when started again.
 pub fn run_local(
     sweep: &Sweep,
     jobs: usize,
     retry_failed: bool,
     progress: bool,
+    stop: &AtomicBool,
     spawn: impl Fn(usize, File) -> std::io::Result<Child>,
 ) -> Result<LocalSummary, SweepError> {
     let mut summary = LocalSummary::default();
-    let mut todo: VecDeque<&ManifestRun> = VecDeque::new();
+    let mut todo: VecDeque<(&ManifestRun, u32)> = VecDeque::new();
     for run in &sweep.runs {
         match sweep.state(run) {
             RunState::Ended(RunOutcome::Finished { .. }) => summary.finished += 1,
             RunState::Ended(RunOutcome::Failed { .. }) if !retry_failed => summary.failed += 1,
-            _ => todo.push_back(run),
+            _ => todo.push_back((run, 0)),
         }
     }
-    let mine: Vec<&ManifestRun> = todo.iter().copied().collect();
-    let total_steps: u64 = mine.iter().map(|r| r.config.steps).sum();
-    let steps_before: u64 = mine.iter().map(|r| steps_done(sweep, r)).sum();
+    // Steps done per run of this runner's, refreshed for the running ones only.
+    let mut steps: Vec<(&ManifestRun, u64)> = todo
+        .iter()
+        .map(|(r, _)| (*r, steps_done(sweep, r)))
+        .collect();
+    let total_steps: u64 = steps.iter().map(|(r, _)| r.config.steps).sum();
+    let steps_before: u64 = steps.iter().map(|(_, s)| s).sum();
     let bar = if progress {
         ProgressBar::new(total_steps)
     } else {
@@ -136,19 +168,40 @@ pub fn run_local(
         ProgressStyle::with_template("{bar:30} {pos}/{len} steps  ETA {eta}  {msg}")
             .expect("a valid template"),
     );
+    bar.set_position(steps_before);
+    bar.reset_eta();
+    let say = |line: String| {
+        if progress {
+            bar.println(line);
+        } else {
+            eprintln!("{line}");
+        }
+    };
     let logs = sweep.dir.join("logs");
     std::fs::create_dir_all(&logs).map_err(|e| SweepError::Io {
         path: logs.display().to_string(),
         message: e.to_string(),
     })?;
-    let started = Instant::now();
-    let mut running: Vec<(&ManifestRun, Child)> = Vec::new();
-    while !todo.is_empty() || !running.is_empty() {
-        while running.len() < jobs.max(1)
-            && let Some(run) = todo.pop_front()
+    let mut running: Vec<(&ManifestRun, u32, Child)> = Vec::new();
+    let mut stopping = false;
+    while !running.is_empty() || (!todo.is_empty() && !stopping) {
+        if stop.load(Ordering::Relaxed) && !stopping {
+            stopping = true;
+            say(format!(
+                "stopping: {} running runs checkpoint and exit",
+                running.len()
+            ));
+            for (_, _, child) in &running {
+                // SAFETY: kill(2) on our own child's pid, which we have not waited for yet.
+                unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+            }
+        }
+        while !stopping
+            && running.len() < jobs.max(1)
+            && let Some((run, tries)) = todo.pop_front()
         {
             let path = logs.join(format!("{}.log", run.id));
-            let log = File::options()
+            let child = File::options()
                 .create(true)
                 .append(true)
                 .open(&path)
@@ -157,12 +210,12 @@ pub fn run_local(
                     path: path.display().to_string(),
                     message: format!("could not start run {}: {e}", run.id),
                 })?;
-            running.push((run, log));
+            running.push((run, tries, child));
         }
-        std::thread::sleep(Duration::from_millis(200));
+        std::thread::sleep(TICK);
         let mut k = 0;
         while k < running.len() {
-            let exited = running[k].1.try_wait().map_err(|e| SweepError::Io {
+            let exited = running[k].2.try_wait().map_err(|e| SweepError::Io {
                 path: running[k].0.id.clone(),
                 message: e.to_string(),
             })?;
@@ -170,43 +223,73 @@ pub fn run_local(
                 k += 1;
                 continue;
             };
-            let (run, _) = running.swap_remove(k);
-            match sweep.state(run) {
-                RunState::Ended(RunOutcome::Finished { .. }) => summary.finished += 1,
-                RunState::Ended(RunOutcome::Interrupted { .. }) => summary.interrupted += 1,
-                RunState::Ended(RunOutcome::Failed { .. }) => summary.failed += 1,
-                _ if status.code() == Some(EXIT_BUSY) => summary.busy += 1,
-                _ => {
-                    // Died without recording (killed, crashed): say so, keep its checkpoint.
-                    sweep.record(
-                        run,
-                        &RunOutcome::Failed {
-                            error: format!(
-                                "the run's process ended with {status} (see logs/{}.log)",
-                                run.id
-                            ),
-                        },
-                    )?;
+            let (run, tries, _) = running.swap_remove(k);
+            match (status.code(), sweep.state(run)) {
+                (Some(EXIT_BUSY), _) if tries < BUSY_RETRIES && !stopping => {
+                    // Perhaps a killed process still lets go of it: try again later.
+                    todo.push_back((run, tries + 1));
+                }
+                (Some(EXIT_BUSY), _) => {
+                    summary.busy += 1;
+                    say(format!("{}: another process is running it", run.id));
+                }
+                (Some(0), RunState::Ended(RunOutcome::Finished { final_return, .. })) => {
+                    summary.finished += 1;
+                    say(format!(
+                        "{}: finished, final return {}",
+                        run.id,
+                        final_return.map_or("-".into(), |r| format!("{r:.1}"))
+                    ));
+                }
+                (Some(EXIT_INTERRUPTED), _) => {
+                    summary.interrupted += 1;
+                    say(format!("{}: stopped with a checkpoint", run.id));
+                }
+                (Some(_), RunState::Ended(RunOutcome::Failed { error })) => {
                     summary.failed += 1;
+                    say(format!("{}: failed: {error}", run.id));
+                }
+                (None, _) => {
+                    // Killed by a signal: its last checkpoint stands, the next start resumes it.
+                    summary.interrupted += 1;
+                    say(format!(
+                        "{}: its process was killed ({status}); the next start resumes it",
+                        run.id
+                    ));
+                }
+                (Some(_), _) => {
+                    // Ended before it could record anything (see its log).
+                    let error = format!(
+                        "the run's process ended with {status} (see logs/{}.log)",
+                        run.id
+                    );
+                    if let Some(_lock) = lock(sweep, run)? {
+                        sweep.record(
+                            run,
+                            &RunOutcome::Failed {
+                                error: error.clone(),
+                            },
+                        )?;
+                    }
+                    summary.failed += 1;
+                    say(format!("{}: failed: {error}", run.id));
                 }
             }
         }
-        let steps_now: u64 = mine
-            .iter()
-            .map(|r| steps_done(sweep, r).min(r.config.steps))
-            .sum();
-        let done_here = steps_now.saturating_sub(steps_before);
-        bar.set_position(steps_now);
-        if done_here > 0 {
-            let rate = done_here as f64 / started.elapsed().as_secs_f64();
-            bar.set_message(format!(
-                "runs: {} finished, {} running, {} failed, {} to start  ({rate:.0} steps/s)",
-                summary.finished,
-                running.len(),
-                summary.failed,
-                todo.len()
-            ));
+        for (run, done) in steps.iter_mut() {
+            // Only a run that is or was just running can have moved (a look at its log).
+            if *done < run.config.steps && sweep.run_dir(run).exists() {
+                *done = steps_done(sweep, run).min(run.config.steps);
+            }
         }
+        bar.set_position(steps.iter().map(|(_, s)| s).sum());
+        bar.set_message(format!(
+            "runs: {} finished, {} running, {} failed, {} to start",
+            summary.finished,
+            running.len(),
+            summary.failed,
+            todo.len()
+        ));
     }
     bar.finish();
     Ok(summary)

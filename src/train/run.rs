@@ -120,20 +120,24 @@ fn stop_requested() -> bool {
     STOP.load(Ordering::Relaxed)
 }
 
-/// Makes SIGTERM (a cluster's preemption or time limit), SIGINT (Ctrl-C) and SIGUSR1 (a
-/// cluster's warning before the time limit) stop training at the end of the current step with
-/// a checkpoint, so that `--resume` continues exactly; a second SIGTERM or SIGINT ends the
-/// process at once.
+/// Makes SIGTERM (a cluster's preemption or time limit), SIGINT (Ctrl-C), SIGHUP (a closed
+/// terminal) and SIGUSR1 (a cluster's warning before its time limit) stop training at the end
+/// of the current step with a checkpoint, so that `--resume` continues exactly. A second
+/// SIGTERM, SIGINT or SIGHUP (not one after SIGUSR1's warning) ends the process at once.
 pub fn stop_on_signals() -> Result<(), TrainError> {
-    use signal_hook::consts::{SIGINT, SIGTERM, SIGUSR1};
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM, SIGUSR1};
     use signal_hook::flag::{register, register_conditional_shutdown};
+    static TERMINATING: LazyLock<Arc<AtomicBool>> =
+        LazyLock::new(|| Arc::new(AtomicBool::new(false)));
     let failed = |e: std::io::Error| TrainError::Io {
         path: "signal handlers".into(),
         message: e.to_string(),
     };
-    for signal in [SIGTERM, SIGINT] {
-        // Registered first, so it sees the flag as the first signal left it.
-        register_conditional_shutdown(signal, 130, Arc::clone(&STOP)).map_err(failed)?;
+    for signal in [SIGTERM, SIGINT, SIGHUP] {
+        // Registered first, so it sees the flag as the first such signal left it.
+        register_conditional_shutdown(signal, 128 + signal, Arc::clone(&TERMINATING))
+            .map_err(failed)?;
+        register(signal, Arc::clone(&TERMINATING)).map_err(failed)?;
         register(signal, Arc::clone(&STOP)).map_err(failed)?;
     }
     register(SIGUSR1, Arc::clone(&STOP)).map_err(failed)?;
@@ -436,13 +440,13 @@ impl Trainer {
                     result.return_mean, result.return_std
                 ));
             }
-            if self.state.env_steps / c.checkpoint_every > self.state.checkpoints_done
-                || self.state.env_steps >= c.steps
-            {
+            let finished = self.state.env_steps >= c.steps;
+            let scheduled = self.state.env_steps / c.checkpoint_every > self.state.checkpoints_done;
+            if scheduled || finished || stop_requested() {
                 self.state.checkpoints_done = self.state.env_steps / c.checkpoint_every;
                 self.save_checkpoint()?;
-            } else if stop_requested() {
-                self.save_checkpoint()?;
+            }
+            if stop_requested() && !finished {
                 bar.abandon();
                 return Err(TrainError::Interrupted {
                     run: self.run.display().to_string(),
