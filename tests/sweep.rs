@@ -4,7 +4,7 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use dhrl::sweep::{Experiment, ManifestRun, RunOutcome, RunState, Sweep};
@@ -151,6 +151,31 @@ fn finished_return(sweep: &Sweep, index: usize) -> f64 {
     }
 }
 
+/// `dhrl sweep run FOLDER --jobs 2` in the background, its output kept.
+fn start_runner(folder: &str) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(["sweep", "run", folder, "--jobs", "2"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Waits (two minutes at most) until one of `runs` has written a checkpoint.
+fn wait_for_a_checkpoint(sweep: &Sweep, runs: &[ManifestRun]) {
+    let start = Instant::now();
+    while !runs
+        .iter()
+        .any(|r| sweep.run_dir(r).join("checkpoint").exists())
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no checkpoint within 2 min"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
 /// The run's configuration trained by `dhrl train` without interruption, in `dir/whole-<index>`.
 fn train_in_one_go(dir: &Path, run: &ManifestRun) -> PathBuf {
     let config = dir.join(format!("config-{}.toml", run.index));
@@ -181,24 +206,8 @@ fn local_runner_finishes_every_run_and_a_killed_sweep_resumes() {
     let folder = sweep.dir.to_str().unwrap().to_string();
     // Start the sweep, kill it (runner and runs, which have their own process groups) once
     // the first checkpoints exist, start it again.
-    let mut runner = Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(["sweep", "run", &folder, "--jobs", "2"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let start = Instant::now();
-    while !sweep
-        .runs
-        .iter()
-        .any(|r| sweep.run_dir(r).join("checkpoint").exists())
-    {
-        assert!(
-            start.elapsed() < Duration::from_secs(120),
-            "no checkpoint within 2 min"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let mut runner = start_runner(&folder);
+    wait_for_a_checkpoint(&sweep, &sweep.runs);
     // Every process whose command line names this sweep's (temporary, unique) folder.
     Command::new("pkill")
         .args(["-KILL", "-f", &folder])
@@ -244,15 +253,7 @@ fn a_run_stopped_by_sigterm_checkpoints_and_resumes_to_the_same_result() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let checkpoint = sweep.run_dir(run).join("checkpoint");
-    let start = Instant::now();
-    while !checkpoint.exists() {
-        assert!(
-            start.elapsed() < Duration::from_secs(120),
-            "no checkpoint within 2 min"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    wait_for_a_checkpoint(&sweep, std::slice::from_ref(run));
     Command::new("kill")
         .args(["-TERM", &child.id().to_string()])
         .status()
@@ -278,24 +279,8 @@ fn a_runner_stopped_by_sigterm_stops_its_runs_with_checkpoints() {
     let dir = tempfile::tempdir().unwrap();
     let sweep = plan_tiny(dir.path());
     let folder = sweep.dir.to_str().unwrap().to_string();
-    let runner = Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(["sweep", "run", &folder, "--jobs", "2"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let start = Instant::now();
-    while !sweep
-        .runs
-        .iter()
-        .any(|r| sweep.run_dir(r).join("checkpoint").exists())
-    {
-        assert!(
-            start.elapsed() < Duration::from_secs(120),
-            "no checkpoint within 2 min"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    let runner = start_runner(&folder);
+    wait_for_a_checkpoint(&sweep, &sweep.runs);
     Command::new("kill")
         .args(["-TERM", &runner.id().to_string()])
         .status()
