@@ -676,3 +676,41 @@ fn train_arguments_resolve_in_order_and_resume_takes_only_steps() {
         "{error}"
     );
 }
+
+/// A loss that stops being finite stops the run with an error naming the update, the step and
+/// the statistic, and the last checkpoint (before the first update here) is kept to resume.
+#[test]
+fn a_non_finite_loss_stops_the_run_and_keeps_the_last_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args([
+            "train",
+            "--task",
+            "inverted-pendulum",
+            "--steps",
+            "1500",
+            "--warmup-steps",
+            "600",
+            "--checkpoint-every",
+            "500",
+            "--eval-every",
+            "500",
+            "--set",
+            "learning_rate=1e30",
+            "--out",
+        ])
+        .arg(&run)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("not finite") && stderr.contains("update ") && stderr.contains("--resume"),
+        "{stderr}"
+    );
+    let state: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("checkpoint/state.json")).unwrap())
+            .unwrap();
+    assert_eq!(state["env_steps"], 500, "the last good checkpoint");
+}

@@ -51,6 +51,18 @@ pub enum TrainError {
          `dhrl train --resume {run}`"
     )]
     Interrupted { run: String, env_steps: u64 },
+    #[error(
+        "update {update} at step {env_steps}: {statistic} is {value}, not finite; the run stopped \
+         and its last checkpoint is kept (lower the learning rates, or check the task's inputs, \
+         then `dhrl train --resume {run}`)"
+    )]
+    NonFinite {
+        run: String,
+        statistic: &'static str,
+        value: f64,
+        update: u64,
+        env_steps: u64,
+    },
     #[error("the agent reported a statistic `{0}` it did not declare in stat_names")]
     UndeclaredStatistic(&'static str),
 }

@@ -328,6 +328,15 @@ impl Trainer {
             Err(e) => return Err(e.into()),
         };
         self.state.updates += 1;
+        if let Some((name, value)) = stats.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(TrainError::NonFinite {
+                run: self.run.display().to_string(),
+                statistic: name,
+                value: *value,
+                update: self.state.updates,
+                env_steps: self.state.env_steps,
+            });
+        }
         for (name, value) in stats {
             let k = self
                 .stat_names
