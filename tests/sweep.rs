@@ -214,11 +214,7 @@ fn local_runner_finishes_every_run_and_a_killed_sweep_resumes() {
         .status()
         .unwrap();
     runner.wait().unwrap();
-    let cut = sweep
-        .runs
-        .iter()
-        .filter(|r| !matches!(sweep.state(r), RunState::Ended(RunOutcome::Finished { .. })))
-        .count();
+    let cut = sweep.runs.iter().filter(|r| !sweep.finished(r)).count();
     assert!(cut > 0, "the kill came after every run had finished");
     let printed = ok(&dhrl(&["sweep", "run", &folder, "--jobs", "2"]));
     assert!(printed.contains("4 finished, 0 failed"), "{printed}");

@@ -288,10 +288,7 @@ fn commands(dir: &Path) -> anyhow::Result<()> {
         .with_context(|| format!("resolving {}", dir.display()))?;
     let mut out = String::new();
     for run in &sweep.runs {
-        if !matches!(
-            sweep.state(run),
-            RunState::Ended(RunOutcome::Finished { .. })
-        ) {
+        if !sweep.finished(run) {
             out += &format!(
                 "{} sweep run-one {} --index {}\n",
                 quote(&exe.display().to_string()),

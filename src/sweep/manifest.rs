@@ -215,6 +215,14 @@ impl Sweep {
         }
     }
 
+    /// Whether the run finished (its outcome says so).
+    pub fn finished(&self, run: &ManifestRun) -> bool {
+        matches!(
+            self.state(run),
+            RunState::Ended(RunOutcome::Finished { .. })
+        )
+    }
+
     /// Records how a run ended.
     pub fn record(&self, run: &ManifestRun, outcome: &RunOutcome) -> Result<(), SweepError> {
         let path = self.status_path(run);

@@ -35,14 +35,14 @@ pub enum RunOneResult {
 /// from running the same run.
 pub fn run_one(sweep: &Sweep, index: usize, progress: bool) -> Result<RunOneResult, SweepError> {
     let run = sweep.run(index)?;
-    if finished(sweep, run) {
+    if sweep.finished(run) {
         return Ok(RunOneResult::AlreadyFinished);
     }
     let Some(_lock) = lock(sweep, run)? else {
         return Ok(RunOneResult::Busy);
     };
     // Another process may have finished it between the look above and the lock.
-    if finished(sweep, run) {
+    if sweep.finished(run) {
         return Ok(RunOneResult::AlreadyFinished);
     }
     sweep.clear_outcome(run)?;
@@ -79,13 +79,6 @@ pub fn run_one(sweep: &Sweep, index: usize, progress: bool) -> Result<RunOneResu
     };
     sweep.record(run, &outcome)?;
     Ok(RunOneResult::Ended(outcome))
-}
-
-fn finished(sweep: &Sweep, run: &ManifestRun) -> bool {
-    matches!(
-        sweep.state(run),
-        RunState::Ended(RunOutcome::Finished { .. })
-    )
 }
 
 /// An exclusive lock on `runs/<id>.lock`, or `None` when another process holds it.
