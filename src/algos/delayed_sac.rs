@@ -26,8 +26,8 @@ use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::sac::{
-    SacBatch, SacLearner, SacStats, adam, load_error, materialize, rows, save_error,
-    transition_tensors,
+    SacBatch, SacLearner, SacStats, adam, load_error, load_module, load_optimizer, materialize,
+    rows, save_error, transition_tensors,
 };
 use super::{
     ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig, Stats, UpdateContext,
@@ -369,18 +369,9 @@ impl Agent for DelayedSac {
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
         self.learner.load(dir, "")?;
         let p = dir.join("model.bpk");
-        self.model.network = self
-            .model
-            .network
-            .clone()
-            .try_load_file(&p)
-            .map_err(|e| load_error(&p, e))?;
+        self.model.network = load_module(self.model.network.clone(), &p)?;
         let p = dir.join("model_adam.bpk");
-        self.model_opt = self
-            .model_opt
-            .clone()
-            .load(&p)
-            .map_err(|e| load_error(&p, e))?;
+        self.model_opt = load_optimizer(self.model_opt.clone(), &p)?;
         let p = dir.join("model_inputs.json");
         let bytes = std::fs::read(&p).map_err(|e| load_error(&p, e))?;
         self.model.moments = serde_json::from_slice(&bytes).map_err(|e| load_error(&p, e))?;

@@ -10,6 +10,8 @@ use std::path::Path;
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
+use burn::store::ModuleRecord;
+use burn::tensor::Bytes;
 
 use super::{
     ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, UpdateContext, check,
@@ -160,6 +162,33 @@ pub(crate) fn load_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
         what: what.display().to_string(),
         message: e.to_string(),
     }
+}
+
+/// Reads a saved file whole into memory. burn's own `load_file`s read tensors lazily, from the
+/// path, when a device first touches them: on wgpu that can come after the next checkpoint
+/// replaced the file (then it silently loads the wrong weights) or after the folder was removed
+/// (then burn's device thread panics). Loading from memory has neither window.
+fn read_whole(path: &Path) -> Result<Bytes, LearnError> {
+    let bytes = std::fs::read(path).map_err(|e| load_error(path, e))?;
+    Ok(Bytes::from_bytes_vec(bytes))
+}
+
+/// Restores a module saved with burn's `save_file`, read whole into memory first.
+pub(crate) fn load_module<M: Module>(module: M, path: &Path) -> Result<M, LearnError> {
+    let record = ModuleRecord::from_bytes(read_whole(path)?).map_err(|e| load_error(path, e))?;
+    module
+        .try_load_record(record)
+        .map_err(|e| load_error(path, e))
+}
+
+/// Restores an optimiser saved with [`ModuleOptimizer::save`], read whole into memory first.
+pub(crate) fn load_optimizer(
+    optimizer: ModuleOptimizer,
+    path: &Path,
+) -> Result<ModuleOptimizer, LearnError> {
+    optimizer
+        .from_bytes(read_whole(path)?)
+        .map_err(|e| load_error(path, e))
 }
 
 /// One SAC batch: what the actor and the critics condition on (the same for SAC itself; the
@@ -442,37 +471,20 @@ impl SacLearner {
     pub fn load(&mut self, dir: &Path, prefix: &str) -> Result<(), LearnError> {
         let path = |name: &str| dir.join(format!("{prefix}{name}"));
         let p = path("actor.bpk");
-        self.actor = self
-            .actor
-            .clone()
-            .try_load_file(&p)
-            .map_err(|e| load_error(&p, e))?;
+        self.actor = load_module(self.actor.clone(), &p)?;
         let p = path("critic.bpk");
-        self.critic = self
-            .critic
-            .clone()
-            .try_load_file(&p)
-            .map_err(|e| load_error(&p, e))?;
+        self.critic = load_module(self.critic.clone(), &p)?;
         let p = path("critic_target.bpk");
-        self.target = self
-            .target
-            .clone()
-            .try_load_file(&p)
-            .map_err(|e| load_error(&p, e))?
-            .valid();
+        self.target = load_module(self.target.clone(), &p)?.valid();
         let p = path("temperature.bpk");
-        self.temperature = self
-            .temperature
-            .clone()
-            .try_load_file(&p)
-            .map_err(|e| load_error(&p, e))?;
+        self.temperature = load_module(self.temperature.clone(), &p)?;
         for (name, opt) in [
             ("actor_adam.bpk", &mut self.actor_opt),
             ("critic_adam.bpk", &mut self.critic_opt),
             ("temperature_adam.bpk", &mut self.temperature_opt),
         ] {
             let p = path(name);
-            *opt = opt.clone().load(&p).map_err(|e| load_error(&p, e))?;
+            *opt = load_optimizer(opt.clone(), &p)?;
         }
         let p = path("noise.json");
         let bytes = std::fs::read(&p).map_err(|e| load_error(&p, e))?;

@@ -42,8 +42,8 @@ use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::sac::{
-    LearningRates, SacBatch, SacLearner, adam, load_error, materialize, rows, save_error,
-    transition_tensors,
+    LearningRates, SacBatch, SacLearner, adam, load_error, load_module, load_optimizer,
+    materialize, rows, save_error, transition_tensors,
 };
 use super::{
     ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig, Stats, UpdateContext,
@@ -524,23 +524,15 @@ impl Agent for Vdpo {
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
         self.reference.load(dir, "reference_")?;
         let p = dir.join("belief.bpk");
-        self.belief = self
-            .belief
-            .clone()
-            .try_load_file(&p)
-            .map_err(|e| load_error(&p, e))?;
+        self.belief = load_module(self.belief.clone(), &p)?;
         let p = dir.join("policy_head.bpk");
-        self.policy_head = self
-            .policy_head
-            .clone()
-            .try_load_file(&p)
-            .map_err(|e| load_error(&p, e))?;
+        self.policy_head = load_module(self.policy_head.clone(), &p)?;
         for (name, opt) in [
             ("belief_adam.bpk", &mut self.belief_opt),
             ("policy_head_adam.bpk", &mut self.policy_head_opt),
         ] {
             let p = dir.join(name);
-            *opt = opt.clone().load(&p).map_err(|e| load_error(&p, e))?;
+            *opt = load_optimizer(opt.clone(), &p)?;
         }
         let p = dir.join("vdpo.json");
         let bytes = std::fs::read(&p).map_err(|e| load_error(&p, e))?;
