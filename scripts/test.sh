@@ -1,19 +1,31 @@
 #!/usr/bin/env bash
 # The whole test suite, on a fresh machine too: set-up (idempotent), Mesa's software Vulkan
 # where no Vulkan driver is installed (so the WGSL kernels and burn's wgpu learner run without a
-# GPU), then every test in release mode. The GPU tests fail when no adapter is found; set
-# DHRL_SKIP_GPU_TESTS=1 to skip them knowingly (they then say so on stderr).
+# GPU) and Debian's slurm-wlm and munge (the Slurm test starts a one-node cluster as root),
+# then every test in release mode. The GPU and Slurm tests fail when they cannot run; set
+# DHRL_SKIP_GPU_TESTS=1 or DHRL_SKIP_SLURM_TESTS=1 to skip them knowingly (they say so).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 scripts/setup.sh
+packages=()
 if [[ "${DHRL_SKIP_GPU_TESTS:-}" != 1 ]] && ! ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1; then
+    packages+=(mesa-vulkan-drivers libvulkan1)
+fi
+if [[ "${DHRL_SKIP_SLURM_TESTS:-}" != 1 ]] && ! command -v slurmctld >/dev/null 2>&1; then
+    packages+=(slurm-wlm munge)
+fi
+if (( ${#packages[@]} )); then
     if [[ "$(id -u)" == 0 ]] && command -v apt-get >/dev/null 2>&1; then
-        echo "test: installing Mesa's software Vulkan (mesa-vulkan-drivers) for the GPU delay-layer tests" >&2
+        echo "test: installing ${packages[*]} (software Vulkan for the GPU tests, a one-node Slurm for the cluster test)" >&2
         apt-get update -qq
-        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${packages[@]}" >/dev/null
     else
-        echo "test: no Vulkan driver found; install mesa-vulkan-drivers (Debian/Ubuntu) or set DHRL_SKIP_GPU_TESTS=1" >&2
+        echo "test: missing ${packages[*]}: install them as root (Debian/Ubuntu), or set DHRL_SKIP_GPU_TESTS=1 / DHRL_SKIP_SLURM_TESTS=1" >&2
     fi
+fi
+# The Slurm test starts its own one-node cluster as root; without Slurm it fails, unless skipped.
+if [[ "${DHRL_SKIP_SLURM_TESTS:-}" != 1 ]]; then
+    export DHRL_REQUIRE_SLURM=1
 fi
 # Everything is built once, with burn's wgpu learner: tests/wgpu_learner.rs checks it against
 # the CPU learner on a real GPU, or on Mesa's software Vulkan (lavapipe) where there is none.

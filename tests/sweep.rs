@@ -124,9 +124,14 @@ fn bad_experiments_are_clear_errors() {
 }
 
 fn plan_tiny(dir: &Path) -> Sweep {
-    let file = dir.join("tiny.toml");
-    std::fs::write(&file, TINY).unwrap();
-    let sweep = dir.join("sweep");
+    plan(dir, TINY, "sweep", 4)
+}
+
+/// Plans `experiment` (of `runs` runs) into `dir/name`, twice: the second plan adds nothing.
+fn plan(dir: &Path, experiment: &str, name: &str, runs: usize) -> Sweep {
+    let file = dir.join(format!("{name}.toml"));
+    std::fs::write(&file, experiment).unwrap();
+    let sweep = dir.join(name);
     let args = [
         "sweep",
         "plan",
@@ -137,10 +142,16 @@ fn plan_tiny(dir: &Path) -> Sweep {
         "0",
     ];
     let printed = ok(&dhrl(&args));
-    assert!(printed.contains("4 runs planned (4 new"), "{printed}");
+    assert!(
+        printed.contains(&format!("{runs} runs planned ({runs} new")),
+        "{printed}"
+    );
     // Planning again adds nothing and moves nothing.
     let printed = ok(&dhrl(&args));
-    assert!(printed.contains("(0 new, 4 planned before"), "{printed}");
+    assert!(
+        printed.contains(&format!("(0 new, {runs} planned before")),
+        "{printed}"
+    );
     Sweep::open(&sweep).unwrap()
 }
 
@@ -306,4 +317,134 @@ fn a_runner_stopped_by_sigterm_stops_its_runs_with_checkpoints() {
         let whole = train_in_one_go(dir.path(), run);
         assert_same_logs(&sweep.run_dir(run), &whole);
     }
+}
+
+/// `dhrl sweep slurm --submit` against a real one-node Slurm (tests/common/slurm.rs): one
+/// array task per run; one task is preempted with `scontrol requeue` once its run has a
+/// checkpoint, and resumes from it when Slurm starts it again; every run ends as it does under
+/// the local runner.
+#[test]
+fn a_slurm_array_requeues_a_preempted_task_and_ends_like_the_local_runner() {
+    let Some(slurm) = common::slurm::Slurm::start(
+        "a_slurm_array_requeues_a_preempted_task_and_ends_like_the_local_runner",
+    ) else {
+        return;
+    };
+    // Two runs long enough (checkpoints every 200 of 1,500 steps) to be caught mid-way.
+    let experiment = TINY
+        .replace("seeds = [0, 1]", "seeds = [3]")
+        .replace("steps = 600", "steps = 1500");
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = plan(dir.path(), &experiment, "on-slurm", 2);
+    let folder = sweep.dir.to_str().unwrap().to_string();
+    let out = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args([
+            "sweep",
+            "slurm",
+            &folder,
+            "--time",
+            "20",
+            "--signal-lead",
+            "60",
+        ])
+        .arg("--submit")
+        .env("SLURM_CONF", slurm.conf())
+        .output()
+        .unwrap();
+    let printed = ok(&out);
+    let job = printed
+        .lines()
+        .find_map(|l| {
+            l.split_once(": job ")
+                .map(|(_, job)| job.trim().to_string())
+        })
+        .unwrap_or_else(|| panic!("no job id in: {printed}"));
+    let script = std::fs::read_to_string(sweep.dir.join("slurm/array-0.sbatch")).unwrap();
+    for directive in [
+        "--array=0-1",
+        "--requeue",
+        "--signal=B:USR1@60",
+        "--time=20",
+    ] {
+        assert!(script.contains(&format!("#SBATCH {directive}")), "{script}");
+    }
+    // Preempt the first run to write a checkpoint: Slurm stops it (SIGTERM) and queues it
+    // again, holding it back for a while as it does every requeued job; the test releases it.
+    wait_for_a_checkpoint(&sweep, &sweep.runs);
+    let preempted = sweep
+        .runs
+        .iter()
+        .find(|r| sweep.run_dir(r).join("checkpoint").exists())
+        .unwrap();
+    let task = format!("{job}_{}", preempted.index);
+    let requeue = slurm.command("scontrol", &["requeue", &task]);
+    assert!(
+        requeue.status.success(),
+        "scontrol requeue {task}: {}\n{}",
+        String::from_utf8_lossy(&requeue.stderr),
+        slurm.logs()
+    );
+    let start = Instant::now();
+    let mut released = false;
+    loop {
+        let queue = slurm.command("squeue", &["-h", "-j", &job, "-o", "%i %T"]);
+        let queue = String::from_utf8_lossy(&queue.stdout).into_owned();
+        if queue.trim().is_empty() {
+            break;
+        }
+        if !released && queue.contains(&format!("{task} PENDING")) {
+            released = slurm
+                .command(
+                    "scontrol",
+                    &["update", &format!("JobId={task}"), "StartTime=now"],
+                )
+                .status
+                .success();
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(600),
+            "the array has not ended after 10 min: {queue}\n{}",
+            slurm.logs()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let logs = |run: &ManifestRun| {
+        std::fs::read_to_string(
+            sweep
+                .dir
+                .join(format!("slurm/logs/{job}_{}.log", run.index)),
+        )
+        .unwrap_or_default()
+    };
+    let log = logs(preempted);
+    assert!(
+        log.contains("(restart 0)") && log.contains("(restart 1)"),
+        "the preempted task ran twice: {log}"
+    );
+    for run in &sweep.runs {
+        assert!(
+            sweep.finished(run),
+            "{}: {:?}\n{}",
+            run.id,
+            sweep.state(run),
+            logs(run)
+        );
+    }
+    // The same experiment under the local runner: the same runs, the same logs.
+    let local = plan(dir.path(), &experiment, "local", 2);
+    let printed = ok(&dhrl(&[
+        "sweep",
+        "run",
+        local.dir.to_str().unwrap(),
+        "--jobs",
+        "2",
+    ]));
+    assert!(printed.contains("2 finished, 0 failed"), "{printed}");
+    for (run, reference) in sweep.runs.iter().zip(&local.runs) {
+        assert_eq!(run.id, reference.id);
+        assert_same_logs(&sweep.run_dir(run), &local.run_dir(reference));
+    }
+    // Nothing is left to submit.
+    let printed = ok(&dhrl(&["sweep", "slurm", &folder]));
+    assert!(printed.contains("every run has finished"), "{printed}");
 }

@@ -11,8 +11,9 @@ use clap::{Args, Subcommand};
 use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
 
 use dhrl::sweep::{
-    EXIT_BUSY, EXIT_INTERRUPTED, Experiment, PRESETS, RunOneResult, RunOutcome, RunState, Sweep,
-    estimate_cost, run_local, run_one, steps_done, write_atomically,
+    EXIT_BUSY, EXIT_INTERRUPTED, Experiment, PRESETS, RunOneResult, RunOutcome, RunState,
+    SlurmOptions, Sweep, estimate_cost, run_local, run_one, shell_quote, steps_done,
+    write_array_scripts, write_atomically,
 };
 use dhrl::tasks::TaskName;
 
@@ -26,6 +27,9 @@ pub enum SweepCommand {
     Run(RunArgs),
     /// Run (or resume) one run of a sweep, by its manifest index: what every engine calls.
     RunOne(RunOneArgs),
+    /// Write a Slurm job-array script (one array task per unfinished run, requeued when
+    /// preempted or near its time limit) into DIR/slurm/, and submit it with --submit.
+    Slurm(SlurmArgs),
     /// One shell command per unfinished run, for GNU parallel, `xargs -P` or `ray job submit`.
     Commands(DirArgs),
     /// Where each run of a sweep stands.
@@ -82,6 +86,42 @@ pub struct RunOneArgs {
 }
 
 #[derive(Args)]
+pub struct SlurmArgs {
+    dir: PathBuf,
+    /// The partition the tasks run in (the cluster's default when not given).
+    #[arg(long)]
+    partition: Option<String>,
+    /// The account the tasks are charged to.
+    #[arg(long)]
+    account: Option<String>,
+    /// Each task's time limit (MM, HH:MM:SS, D-HH:MM, …); a run cut by it resumes when its
+    /// task is requeued.
+    #[arg(long)]
+    time: Option<String>,
+    /// Memory per task (`--mem`: 4G, 4000M).
+    #[arg(long)]
+    mem: Option<String>,
+    /// Array tasks running at once.
+    #[arg(long, value_name = "K")]
+    max_parallel: Option<usize>,
+    /// Cores per task (default: the most learner threads among the sweep's algorithms).
+    #[arg(long)]
+    cpus_per_task: Option<usize>,
+    /// Seconds before the time limit at which a run checkpoints and its task requeues.
+    #[arg(long, default_value_t = 300)]
+    signal_lead: u64,
+    /// The cluster's MaxArraySize (`scontrol show config`): larger sweeps get several scripts.
+    #[arg(long, default_value_t = 1001)]
+    max_array_size: usize,
+    /// One more sbatch option for the script, e.g. --sbatch=--qos=long (repeatable).
+    #[arg(long = "sbatch", value_name = "OPTION", allow_hyphen_values = true)]
+    extra: Vec<String>,
+    /// Submit the scripts with `sbatch` (otherwise they are only written).
+    #[arg(long)]
+    submit: bool,
+}
+
+#[derive(Args)]
 pub struct DirArgs {
     dir: PathBuf,
 }
@@ -91,6 +131,7 @@ pub fn run(command: &SweepCommand) -> anyhow::Result<()> {
         SweepCommand::Plan(args) => plan(args),
         SweepCommand::Run(args) => run_here(args),
         SweepCommand::RunOne(args) => run_single(args),
+        SweepCommand::Slurm(args) => slurm(args),
         SweepCommand::Commands(args) => commands(&args.dir),
         SweepCommand::Status(args) => status(&args.dir),
     }
@@ -182,7 +223,7 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
         );
     }
     println!(
-        "next: dhrl sweep run {0} --jobs N | dhrl sweep commands {0}",
+        "next: dhrl sweep run {0} --jobs N | dhrl sweep slurm {0} --submit | dhrl sweep commands {0}",
         args.out.display()
     );
     Ok(())
@@ -276,8 +317,77 @@ fn run_single(args: &RunOneArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn quote(text: &str) -> String {
-    format!("'{}'", text.replace('\'', r"'\''"))
+fn slurm(args: &SlurmArgs) -> anyhow::Result<()> {
+    let sweep = Sweep::open(&args.dir)?;
+    let exe = std::env::current_exe().context("finding the dhrl executable")?;
+    let options = SlurmOptions {
+        partition: args.partition.clone(),
+        account: args.account.clone(),
+        time: args.time.clone(),
+        mem: args.mem.clone(),
+        max_parallel: args.max_parallel,
+        cpus_per_task: args.cpus_per_task,
+        signal_lead: args.signal_lead,
+        max_array_size: args.max_array_size,
+        extra: args.extra.clone(),
+    };
+    let scripts = write_array_scripts(&sweep, &exe, &options)?;
+    if scripts.is_empty() {
+        println!(
+            "{}: every run has finished; no script written",
+            args.dir.display()
+        );
+        return Ok(());
+    }
+    for script in &scripts {
+        println!(
+            "{}: {} runs (manifest indices {}..={})",
+            script.path.display(),
+            script.runs.len(),
+            script.runs[0],
+            script.runs[script.runs.len() - 1]
+        );
+    }
+    if !args.submit {
+        println!("submit with: sbatch SCRIPT (or run this again with --submit)");
+        return Ok(());
+    }
+    let mut submitted = String::new();
+    for script in &scripts {
+        let out = Command::new("sbatch")
+            .arg("--parsable")
+            .arg(&script.path)
+            .output()
+            .with_context(|| {
+                format!(
+                    "running sbatch (is this a Slurm login node?); the script is {}",
+                    script.path.display()
+                )
+            })?;
+        anyhow::ensure!(
+            out.status.success(),
+            "sbatch {} failed: {}",
+            script.path.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let job = stdout
+            .trim()
+            .split(';')
+            .next()
+            .unwrap_or_default()
+            .to_string();
+        println!("submitted {}: job {job}", script.path.display());
+        submitted += &format!("{job} {}\n", script.path.display());
+    }
+    let record = sweep.dir.join("slurm").join("submitted.txt");
+    let earlier = std::fs::read_to_string(&record).unwrap_or_default();
+    write_atomically(&record, &(earlier + &submitted))?;
+    println!(
+        "follow with: squeue --me; dhrl sweep status {}",
+        args.dir.display()
+    );
+    Ok(())
 }
 
 fn commands(dir: &Path) -> anyhow::Result<()> {
@@ -291,8 +401,8 @@ fn commands(dir: &Path) -> anyhow::Result<()> {
         if !sweep.finished(run) {
             out += &format!(
                 "{} sweep run-one {} --index {}\n",
-                quote(&exe.display().to_string()),
-                quote(&dir.display().to_string()),
+                shell_quote(&exe.display().to_string()),
+                shell_quote(&dir.display().to_string()),
                 run.index
             );
         }

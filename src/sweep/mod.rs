@@ -7,6 +7,7 @@ mod cost;
 mod experiment;
 mod manifest;
 mod runner;
+mod slurm;
 
 pub use cost::{CostRow, estimate_cost};
 pub use experiment::{DelayKind, Experiment, PRESETS, PlannedRun, run_id};
@@ -14,6 +15,7 @@ pub use manifest::{ManifestRun, PlanChange, RunOutcome, RunState, Sweep, write_a
 pub use runner::{
     EXIT_BUSY, EXIT_INTERRUPTED, LocalSummary, RunOneResult, run_local, run_one, steps_done,
 };
+pub use slurm::{ArrayScript, SlurmOptions, shell_quote, time_limit_seconds, write_array_scripts};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SweepError {

@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests that train end to end.
 #![allow(dead_code)] // each test file uses its own subset
 
+pub mod slurm;
+
 use std::path::Path;
 use std::process::Command;
 
