@@ -320,20 +320,22 @@ fn a_runner_stopped_by_sigterm_stops_its_runs_with_checkpoints() {
 }
 
 /// `dhrl sweep slurm --submit` against a real one-node Slurm (tests/common/slurm.rs): one
-/// array task per run; one task is preempted with `scontrol requeue` once its run has a
-/// checkpoint, and resumes from it when Slurm starts it again; every run ends as it does under
-/// the local runner.
+/// array task per run. Once its run has a checkpoint, one task is preempted with `scontrol
+/// requeue` (Slurm's SIGTERM reaches the run), the other gets the script's pre-limit signal
+/// (USR1 to the batch shell, as `--signal=B:USR1@…` sends it; the script requeues the task
+/// itself). Both resume from their checkpoints when Slurm starts them again, and every run
+/// ends as it does under the local runner.
 #[test]
-fn a_slurm_array_requeues_a_preempted_task_and_ends_like_the_local_runner() {
+fn a_slurm_array_requeues_stopped_tasks_and_ends_like_the_local_runner() {
     let Some(slurm) = common::slurm::Slurm::start(
-        "a_slurm_array_requeues_a_preempted_task_and_ends_like_the_local_runner",
+        "a_slurm_array_requeues_stopped_tasks_and_ends_like_the_local_runner",
     ) else {
         return;
     };
-    // Two runs long enough (checkpoints every 200 of 1,500 steps) to be caught mid-way.
+    // Two runs long enough (checkpoints every 200 of 3,000 steps) to be caught mid-way.
     let experiment = TINY
         .replace("seeds = [0, 1]", "seeds = [3]")
-        .replace("steps = 600", "steps = 1500");
+        .replace("steps = 600", "steps = 3000");
     let dir = tempfile::tempdir().unwrap();
     let sweep = plan(dir.path(), &experiment, "on-slurm", 2);
     let folder = sweep.dir.to_str().unwrap().to_string();
@@ -368,38 +370,37 @@ fn a_slurm_array_requeues_a_preempted_task_and_ends_like_the_local_runner() {
     ] {
         assert!(script.contains(&format!("#SBATCH {directive}")), "{script}");
     }
-    // Preempt the first run to write a checkpoint: Slurm stops it (SIGTERM) and queues it
-    // again, holding it back for a while as it does every requeued job; the test releases it.
-    wait_for_a_checkpoint(&sweep, &sweep.runs);
-    let preempted = sweep
-        .runs
-        .iter()
-        .find(|r| sweep.run_dir(r).join("checkpoint").exists())
-        .unwrap();
-    let task = format!("{job}_{}", preempted.index);
-    let requeue = slurm.command("scontrol", &["requeue", &task]);
-    assert!(
-        requeue.status.success(),
-        "scontrol requeue {task}: {}\n{}",
-        String::from_utf8_lossy(&requeue.stderr),
-        slurm.logs()
+    let stop = |run: &ManifestRun, program: &str, args: &[&str]| {
+        wait_for_a_checkpoint(&sweep, std::slice::from_ref(run));
+        let out = slurm.command(program, args);
+        assert!(
+            out.status.success(),
+            "{program} {args:?}: {}\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            slurm.logs()
+        );
+    };
+    let (preempted, warned) = (&sweep.runs[0], &sweep.runs[1]);
+    stop(preempted, "scontrol", &["requeue", &format!("{job}_0")]);
+    stop(
+        warned,
+        "scancel",
+        &["--batch", "--signal=USR1", &format!("{job}_1")],
     );
+    // Slurm holds a requeued task back for a while (BeginTime); the test releases it.
     let start = Instant::now();
-    let mut released = false;
     loop {
-        let queue = slurm.command("squeue", &["-h", "-j", &job, "-o", "%i %T"]);
+        let queue = slurm.command("squeue", &["-h", "-j", &job, "-o", "%i %T %r"]);
         let queue = String::from_utf8_lossy(&queue.stdout).into_owned();
         if queue.trim().is_empty() {
             break;
         }
-        if !released && queue.contains(&format!("{task} PENDING")) {
-            released = slurm
-                .command(
-                    "scontrol",
-                    &["update", &format!("JobId={task}"), "StartTime=now"],
-                )
-                .status
-                .success();
+        for line in queue.lines().filter(|l| l.ends_with("PENDING BeginTime")) {
+            let task = line.split(' ').next().unwrap();
+            slurm.command(
+                "scontrol",
+                &["update", &format!("JobId={task}"), "StartTime=now"],
+            );
         }
         assert!(
             start.elapsed() < Duration::from_secs(600),
@@ -416,10 +417,18 @@ fn a_slurm_array_requeues_a_preempted_task_and_ends_like_the_local_runner() {
         )
         .unwrap_or_default()
     };
-    let log = logs(preempted);
+    for run in [preempted, warned] {
+        let log = logs(run);
+        assert!(
+            log.contains("(restart 0)") && log.contains("(restart 1)"),
+            "{}: the stopped task ran twice: {log}",
+            run.id
+        );
+    }
     assert!(
-        log.contains("(restart 0)") && log.contains("(restart 1)"),
-        "the preempted task ran twice: {log}"
+        logs(warned).contains("requeueing"),
+        "the pre-limit signal requeued the task: {}",
+        logs(warned)
     );
     for run in &sweep.runs {
         assert!(
