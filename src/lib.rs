@@ -1,8 +1,10 @@
 //! dhrl: delayed homomorphic reinforcement learning on batched MuJoCo tasks.
 pub mod algos;
 pub mod bench;
+pub mod charts;
 pub mod delay;
 pub mod learn;
+pub mod report;
 pub mod rollout;
 pub mod seeds;
 pub mod sim;

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 use cli::bench::BenchCommand;
 use cli::eval::EvalArgs;
 use cli::plot::PlotArgs;
+use cli::report::ReportArgs;
 use cli::rollout::RolloutArgs;
 use cli::sweep::SweepCommand;
 use dhrl::tabular::{TabularArgs, TabularBenchArgs, run_tabular, run_tabular_bench};
@@ -31,6 +32,9 @@ enum Command {
     /// Learning curves of finished runs (grouped by task, algorithm and delay) as SVG, and a
     /// table of their final evaluations.
     Plot(PlotArgs),
+    /// The paper's Table 1 layout (Markdown, LaTeX, CSV, the published numbers beside), an
+    /// rliable-style aggregate, figures (SVG, PNG) and a long-format CSV from runs or sweeps.
+    Report(ReportArgs),
     /// Trace one episode from a given state and action sequence, one JSON object per line.
     Rollout(RolloutArgs),
     /// Experiments as data: plan a grid of runs (the paper's presets or a TOML file), run it
@@ -51,6 +55,7 @@ fn main() -> anyhow::Result<()> {
         Command::Train(args) => cli::train::run(&args),
         Command::Eval(args) => cli::eval::run(&args),
         Command::Plot(args) => cli::plot::run(&args),
+        Command::Report(args) => cli::report::run(&args),
         Command::Rollout(args) => cli::rollout::run(&args),
         Command::Sweep(command) => cli::sweep::run(&command),
         Command::Bench(command) => cli::bench::run(&command),

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod eval;
 pub mod plot;
+pub mod report;
 pub mod rollout;
 pub mod sweep;
 pub mod train;

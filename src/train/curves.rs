@@ -4,10 +4,10 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use plotters::prelude::*;
 use serde::Serialize;
 
 use super::{TrainConfig, TrainError, io_error};
+use crate::charts::{Labels, Line, line_chart};
 
 /// One group of runs (the same task, algorithm, delay and lifting settings; several seeds).
 #[derive(Debug, Clone, Serialize)]
@@ -30,8 +30,19 @@ impl CurveSummary {
     }
 }
 
-/// `(step, return_mean, return_std)` rows of a run's `evals.csv`.
-fn read_evals(run: &Path) -> Result<Vec<(u64, f64, f64)>, TrainError> {
+/// One row of a run's `evals.csv`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EvalRow {
+    pub step: u64,
+    /// Training wall-clock seconds up to this evaluation (carried across resumes).
+    pub wall_seconds: f64,
+    pub return_mean: f64,
+    /// Over the evaluation's episodes.
+    pub return_std: f64,
+}
+
+/// The rows of a run's `evals.csv`.
+pub fn read_evals(run: &Path) -> Result<Vec<EvalRow>, TrainError> {
     let path = run.join("evals.csv");
     let text = std::fs::read_to_string(&path).map_err(io_error(&path))?;
     let bad = |line: usize| TrainError::Io {
@@ -49,14 +60,19 @@ fn read_evals(run: &Path) -> Result<Vec<(u64, f64, f64)>, TrainError> {
                     .and_then(|f| f.parse::<f64>().ok())
                     .ok_or_else(|| bad(i + 1))
             };
-            Ok((number(0)? as u64, number(2)?, number(3)?))
+            Ok(EvalRow {
+                step: number(0)? as u64,
+                wall_seconds: number(1)?,
+                return_mean: number(2)?,
+                return_std: number(3)?,
+            })
         })
         .collect()
 }
 
 /// Groups and averages the runs.
 pub fn summarize_runs(runs: &[PathBuf]) -> Result<Vec<CurveSummary>, TrainError> {
-    let mut groups: BTreeMap<String, Vec<(u64, Vec<(u64, f64, f64)>)>> = BTreeMap::new();
+    let mut groups: BTreeMap<String, Vec<(u64, Vec<EvalRow>)>> = BTreeMap::new();
     for run in runs {
         let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
         let delay = config.validate()?;
@@ -76,131 +92,82 @@ pub fn summarize_runs(runs: &[PathBuf]) -> Result<Vec<CurveSummary>, TrainError>
     }
     Ok(groups
         .into_iter()
-        .map(|(label, members)| {
-            let steps: Vec<u64> = members[0]
-                .1
-                .iter()
-                .map(|row| row.0)
-                .filter(|step| {
-                    members
-                        .iter()
-                        .all(|(_, rows)| rows.iter().any(|r| r.0 == *step))
-                })
-                .collect();
-            let at = |rows: &[(u64, f64, f64)], step: u64| {
-                *rows.iter().find(|r| r.0 == step).expect("filtered above")
-            };
-            let (mut mean, mut std) = (Vec::new(), Vec::new());
-            for &step in &steps {
-                let values: Vec<(f64, f64)> = members
-                    .iter()
-                    .map(|(_, rows)| {
-                        let r = at(rows, step);
-                        (r.1, r.2)
-                    })
-                    .collect();
-                let n = values.len() as f64;
-                let m = values.iter().map(|v| v.0).sum::<f64>() / n;
-                mean.push(m);
-                std.push(if values.len() == 1 {
-                    values[0].1
-                } else {
-                    (values.iter().map(|v| (v.0 - m).powi(2)).sum::<f64>() / n).sqrt()
-                });
-            }
-            CurveSummary {
-                label,
-                seeds: members.iter().map(|m| m.0).collect(),
-                steps,
-                mean,
-                std,
-            }
-        })
+        .map(|(label, members)| curve_summary(label, &members))
         .collect())
 }
 
-/// Draws the curves (mean over seeds, with ± std bars) to an SVG file.
-pub fn plot_curves(curves: &[CurveSummary], title: &str, out: &Path) -> Result<(), TrainError> {
-    draw(curves, title, out).map_err(|e| TrainError::Io {
-        path: out.display().to_string(),
-        message: e.to_string(),
-    })
+/// The mean and spread over seeds of `members`' `(seed, evaluations)`, at the evaluation steps
+/// every member has.
+pub fn curve_summary(label: String, members: &[(u64, Vec<EvalRow>)]) -> CurveSummary {
+    let steps: Vec<u64> = members[0]
+        .1
+        .iter()
+        .map(|row| row.step)
+        .filter(|step| {
+            members
+                .iter()
+                .all(|(_, rows)| rows.iter().any(|r| r.step == *step))
+        })
+        .collect();
+    let at = |rows: &[EvalRow], step: u64| {
+        *rows
+            .iter()
+            .find(|r| r.step == step)
+            .expect("filtered above")
+    };
+    let (mut mean, mut std) = (Vec::new(), Vec::new());
+    for &step in &steps {
+        let values: Vec<(f64, f64)> = members
+            .iter()
+            .map(|(_, rows)| {
+                let r = at(rows, step);
+                (r.return_mean, r.return_std)
+            })
+            .collect();
+        let n = values.len() as f64;
+        let m = values.iter().map(|v| v.0).sum::<f64>() / n;
+        mean.push(m);
+        std.push(if values.len() == 1 {
+            values[0].1
+        } else {
+            (values.iter().map(|v| (v.0 - m).powi(2)).sum::<f64>() / n).sqrt()
+        });
+    }
+    CurveSummary {
+        label,
+        seeds: members.iter().map(|m| m.0).collect(),
+        steps,
+        mean,
+        std,
+    }
 }
 
-fn draw(
-    curves: &[CurveSummary],
-    title: &str,
-    out: &Path,
-) -> Result<(), Box<dyn std::error::Error>> {
-    let max_step = curves
+/// Draws the curves (mean over seeds, with a shaded ± std band) to an SVG file.
+pub fn plot_curves(curves: &[CurveSummary], title: &str, out: &Path) -> Result<(), TrainError> {
+    let lines: Vec<Line> = curves
         .iter()
-        .flat_map(|c| c.steps.iter().copied())
-        .max()
-        .unwrap_or(1) as f64;
-    let (mut low, mut high) = (0.0f64, 1.0f64);
-    for c in curves {
-        for (m, s) in c.mean.iter().zip(&c.std) {
-            low = low.min(m - s);
-            high = high.max(m + s);
-        }
-    }
-    let margin = 0.05 * (high - low);
-    let root = SVGBackend::new(out, (900, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..max_step * 1.02, (low - margin)..(high + margin))?;
-    chart
-        .configure_mesh()
-        .x_desc("environment steps")
-        .y_desc("evaluation return (mean over seeds ± std)")
-        .draw()?;
-    for (i, curve) in curves.iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba();
-        let points: Vec<(f64, f64)> = curve
-            .steps
-            .iter()
-            .zip(&curve.mean)
-            .map(|(&s, &m)| (s as f64, m))
-            .collect();
-        chart
-            .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
-            .label(format!(
+        .map(|curve| Line {
+            label: format!(
                 "{} ({} seed{})",
                 curve.label,
                 curve.seeds.len(),
                 if curve.seeds.len() == 1 { "" } else { "s" }
-            ))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
-        chart.draw_series(
-            curve
+            ),
+            points: curve
                 .steps
                 .iter()
                 .zip(curve.mean.iter().zip(&curve.std))
-                .map(|(&s, (&m, &d))| {
-                    PathElement::new(
-                        vec![(s as f64, m - d), (s as f64, m + d)],
-                        color.mix(0.5).stroke_width(1),
-                    )
-                }),
-        )?;
-        chart.draw_series(
-            points
-                .into_iter()
-                .map(|p| Circle::new(p, 3, color.filled())),
-        )?;
-    }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
-    root.present()?;
-    Ok(())
+                .map(|(&s, (&m, &d))| (s as f64, m, d))
+                .collect(),
+        })
+        .collect();
+    let labels = Labels {
+        title,
+        x: "environment steps",
+        y: "evaluation return (mean over seeds ± std)",
+    };
+    line_chart(&lines, &labels, out).map_err(|e| TrainError::Io {
+        path: out.display().to_string(),
+        message: e.to_string(),
+    })
 }

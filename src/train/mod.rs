@@ -13,7 +13,7 @@ mod run;
 pub use args::{TrainArgs, TrainPlan};
 pub use checkpoint::has_checkpoint;
 pub use config::{ConfigError, TrainConfig};
-pub use curves::{CurveSummary, plot_curves, summarize_runs};
+pub use curves::{CurveSummary, EvalRow, curve_summary, plot_curves, read_evals, summarize_runs};
 pub use eval::{EvalResult, evaluate};
 pub use run::{Start, TrainSummary, evaluate_saved, learner_pool, stop_on_signals, train};
 

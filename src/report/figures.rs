@@ -1,0 +1,284 @@
+//! The report's figures, each an SVG and a PNG: learning curves per task × Δ, normalised
+//! return against actuator noise σ, random against fixed delays, the D2HPG ablation, and
+//! wall-clock per 1M steps.
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use super::ReportError;
+use super::normalised;
+use super::results::RunResult;
+use super::stats::mean_std;
+use super::table::display_name;
+use crate::algos::names;
+use crate::charts::{CategorySeries, Labels, Line, category_chart, line_chart, svg_to_png};
+use crate::tasks::TaskName;
+use crate::train::{curve_summary, plot_curves};
+
+fn chart_error(path: &Path) -> impl Fn(Box<dyn std::error::Error>) -> ReportError + '_ {
+    move |e| ReportError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
+}
+
+/// Writes `name.svg` with `draw`, then its PNG; returns both paths.
+fn figure(
+    out: &Path,
+    name: &str,
+    draw: impl FnOnce(&Path) -> Result<(), ReportError>,
+) -> Result<Vec<PathBuf>, ReportError> {
+    let svg = out.join(format!("{name}.svg"));
+    draw(&svg)?;
+    let png = svg_to_png(&svg).map_err(chart_error(&svg))?;
+    Ok(vec![svg, png])
+}
+
+/// Every figure the runs allow.
+pub fn all(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    let mut files = learning_curves(runs, out)?;
+    files.extend(noise(runs, out)?);
+    files.extend(random_delay(runs, out)?);
+    files.extend(ablation(runs, out)?);
+    files.extend(runtime(runs, out)?);
+    Ok(files)
+}
+
+/// One chart per task and Δ of the fixed-delay runs: a curve per algorithm, the delay-free
+/// reference of the task included.
+fn learning_curves(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    let table: Vec<&RunResult> = runs.iter().filter(|r| r.condition.is_table1()).collect();
+    let cells: BTreeSet<(TaskName, usize)> = table
+        .iter()
+        .filter(|r| r.condition.delay > 0)
+        .map(|r| (r.task, r.condition.delay))
+        .collect();
+    let mut files = Vec::new();
+    for (task, delay) in cells {
+        let curves: Vec<_> = names()
+            .into_iter()
+            .filter_map(|algorithm| {
+                let members: Vec<_> = table
+                    .iter()
+                    .filter(|r| {
+                        r.task == task
+                            && r.algorithm == algorithm
+                            && (r.condition.delay == delay || r.condition.delay == 0)
+                    })
+                    .map(|r| (r.seed, r.evals.clone()))
+                    .collect();
+                (!members.is_empty()).then(|| curve_summary(display_name(algorithm), &members))
+            })
+            .collect();
+        let title = format!("{} at Δ = {delay}", task.gymnasium_id());
+        files.extend(figure(out, &format!("curves-{task}-d{delay}"), |svg| {
+            Ok(plot_curves(&curves, &title, svg)?)
+        })?);
+    }
+    Ok(files)
+}
+
+/// Mean ± std over seeds of the normalised final returns of `runs`.
+fn normalised_mean(runs: &[&RunResult]) -> Option<(f64, f64)> {
+    let values: Vec<f64> = runs
+        .iter()
+        .map(|r| normalised(r.task, r.final_eval().1))
+        .collect();
+    (!values.is_empty()).then(|| mean_std(&values))
+}
+
+/// Normalised final return against σ, a line per task (and algorithm, Δ) that has noisy runs;
+/// its σ = 0 runs are the first point.
+fn noise(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    let fixed: Vec<&RunResult> = runs.iter().filter(|r| !r.condition.random_delay).collect();
+    let noisy: BTreeSet<(TaskName, &str, usize)> = fixed
+        .iter()
+        .filter(|r| r.condition.actuator_noise > 0.0)
+        .map(|r| (r.task, r.algorithm, r.condition.delay))
+        .collect();
+    if noisy.is_empty() {
+        return Ok(Vec::new());
+    }
+    let lines: Vec<Line> = noisy
+        .iter()
+        .map(|&(task, algorithm, delay)| {
+            let same: Vec<&RunResult> = fixed
+                .iter()
+                .copied()
+                .filter(|r| {
+                    r.task == task && r.algorithm == algorithm && r.condition.delay == delay
+                })
+                .collect();
+            let sigmas: BTreeSet<u64> = same
+                .iter()
+                .map(|r| r.condition.actuator_noise.to_bits())
+                .collect();
+            let mut points: Vec<(f64, f64, f64)> = sigmas
+                .into_iter()
+                .filter_map(|bits| {
+                    let at: Vec<&RunResult> = same
+                        .iter()
+                        .copied()
+                        .filter(|r| r.condition.actuator_noise.to_bits() == bits)
+                        .collect();
+                    normalised_mean(&at).map(|(m, s)| (f64::from_bits(bits), m, s))
+                })
+                .collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            Line {
+                label: format!("{task} {} Δ={delay}", display_name(algorithm)),
+                points,
+            }
+        })
+        .collect();
+    let labels = Labels {
+        title: "Final return under actuator noise",
+        x: "actuator noise σ",
+        y: "normalised return (mean over seeds ± std)",
+    };
+    figure(out, "noise", |svg| {
+        line_chart(&lines, &labels, svg).map_err(chart_error(svg))
+    })
+}
+
+/// Random delays (uniform in 1..=Δ) against fixed Δ, per task, for each algorithm that has
+/// random-delay runs.
+fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    let random: BTreeSet<(&str, usize)> = runs
+        .iter()
+        .filter(|r| r.condition.random_delay && r.condition.actuator_noise == 0.0)
+        .map(|r| (r.algorithm, r.condition.delay))
+        .collect();
+    if random.is_empty() {
+        return Ok(Vec::new());
+    }
+    let tasks: Vec<TaskName> = TaskName::ALL
+        .into_iter()
+        .filter(|t| {
+            runs.iter()
+                .any(|r| r.task == *t && r.condition.random_delay)
+        })
+        .collect();
+    let mut series = Vec::new();
+    for &(algorithm, delay) in &random {
+        for kind in [false, true] {
+            let values = tasks
+                .iter()
+                .map(|&task| {
+                    let at: Vec<&RunResult> = runs
+                        .iter()
+                        .filter(|r| {
+                            r.task == task
+                                && r.algorithm == algorithm
+                                && r.condition.delay == delay
+                                && r.condition.random_delay == kind
+                                && r.condition.actuator_noise == 0.0
+                        })
+                        .collect();
+                    normalised_mean(&at)
+                })
+                .collect();
+            series.push(CategorySeries {
+                label: format!(
+                    "{} {}",
+                    display_name(algorithm),
+                    if kind {
+                        format!("random Δ in 1..={delay}")
+                    } else {
+                        format!("fixed Δ={delay}")
+                    }
+                ),
+                values,
+            });
+        }
+    }
+    let categories: Vec<String> = tasks.iter().map(|t| t.to_string()).collect();
+    let labels = Labels {
+        title: "Random against fixed delays",
+        x: "task",
+        y: "normalised return (mean over seeds ± std)",
+    };
+    figure(out, "random-delay", |svg| {
+        category_chart(&categories, &series, &labels, svg).map_err(chart_error(svg))
+    })
+}
+
+/// D2HPG-naive, BPQL and D2HPG per task and Δ, where D2HPG-naive ran.
+fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    let table: Vec<&RunResult> = runs.iter().filter(|r| r.condition.is_table1()).collect();
+    let cells: Vec<(TaskName, usize)> = table
+        .iter()
+        .filter(|r| r.algorithm == "d2hpg-naive")
+        .map(|r| (r.task, r.condition.delay))
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    if cells.is_empty() {
+        return Ok(Vec::new());
+    }
+    let series: Vec<CategorySeries> = ["d2hpg-naive", "bpql", "d2hpg"]
+        .into_iter()
+        .map(|algorithm| CategorySeries {
+            label: display_name(algorithm),
+            values: cells
+                .iter()
+                .map(|&(task, delay)| {
+                    let at: Vec<&RunResult> = table
+                        .iter()
+                        .copied()
+                        .filter(|r| {
+                            r.task == task && r.algorithm == algorithm && r.condition.delay == delay
+                        })
+                        .collect();
+                    normalised_mean(&at)
+                })
+                .collect(),
+        })
+        .collect();
+    let categories: Vec<String> = cells.iter().map(|(t, d)| format!("{t} Δ={d}")).collect();
+    let labels = Labels {
+        title: "Ablation: lifting (D2HPG) against none (BPQL) and the naive abstraction",
+        x: "task and delay",
+        y: "normalised return (mean over seeds ± std)",
+    };
+    figure(out, "ablation", |svg| {
+        category_chart(&categories, &series, &labels, svg).map_err(chart_error(svg))
+    })
+}
+
+/// Hours of wall-clock per 1M environment steps, per algorithm, a series per task and Δ.
+fn runtime(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    let algorithms: Vec<&str> = names()
+        .into_iter()
+        .filter(|a| runs.iter().any(|r| r.algorithm == *a))
+        .collect();
+    let cells: BTreeSet<(TaskName, usize)> =
+        runs.iter().map(|r| (r.task, r.condition.delay)).collect();
+    let series: Vec<CategorySeries> = cells
+        .iter()
+        .map(|&(task, delay)| CategorySeries {
+            label: format!("{task} Δ={delay}"),
+            values: algorithms
+                .iter()
+                .map(|&algorithm| {
+                    let hours: Vec<f64> = runs
+                        .iter()
+                        .filter(|r| {
+                            r.task == task && r.condition.delay == delay && r.algorithm == algorithm
+                        })
+                        .filter_map(|r| r.seconds_per_million().map(|s| s / 3600.0))
+                        .collect();
+                    (!hours.is_empty()).then(|| mean_std(&hours))
+                })
+                .collect(),
+        })
+        .collect();
+    let categories: Vec<String> = algorithms.iter().map(|a| display_name(a)).collect();
+    let labels = Labels {
+        title: "Wall-clock per 1M environment steps (this machine)",
+        x: "algorithm",
+        y: "hours per 1M steps (mean over runs ± std)",
+    };
+    figure(out, "runtime", |svg| {
+        category_chart(&categories, &series, &labels, svg).map_err(chart_error(svg))
+    })
+}

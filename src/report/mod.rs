@@ -1,0 +1,298 @@
+//! `dhrl report`: runs (or whole sweeps) turned into the paper's Table 1 layout (Markdown,
+//! LaTeX, CSV, the published numbers beside ours), an rliable-style aggregate, figures, and a
+//! long-format CSV of every evaluation.
+//!
+//! Returns are normalised per task by the paper's delay-free SAC return on that task (Table 1's
+//! first row): 1.0 is what SAC reaches without delay in the paper, so a normalised score says
+//! how much of the undelayed performance an agent keeps under delay. The aggregate is the IQM
+//! of those scores over every run of every task with a 95% stratified-bootstrap interval, and
+//! the probability that D2HPG's final return beats each baseline's (per task, over run pairs,
+//! then averaged over tasks), with its interval.
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+mod figures;
+mod results;
+mod stats;
+mod table;
+
+pub use results::{Condition, RunResult, load_runs};
+pub use stats::{iqm, mean_std, probability_of_improvement};
+pub use table::{PaperCell, Table, display_name, paper_table1, table1};
+
+use crate::algos::names;
+use crate::sweep::write_atomically;
+use crate::tasks::TaskName;
+use stats::{Strata, bootstrap_interval, iqm_of_strata};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    #[error("{0}")]
+    NoResults(String),
+    #[error("{path}: {message}")]
+    Io { path: String, message: String },
+    #[error(transparent)]
+    Train(#[from] crate::train::TrainError),
+    #[error(transparent)]
+    Sweep(#[from] crate::sweep::SweepError),
+}
+
+impl From<crate::train::ConfigError> for ReportError {
+    fn from(e: crate::train::ConfigError) -> ReportError {
+        ReportError::Train(e.into())
+    }
+}
+
+/// A final return as a fraction of the paper's delay-free SAC return on the task.
+pub fn normalised(task: TaskName, final_return: f64) -> f64 {
+    let reference = paper_table1()
+        .into_iter()
+        .find(|c| c.delay == 0 && c.algorithm == "sac" && c.task == task)
+        .expect("Table 1 has delay-free SAC on every task");
+    final_return / reference.mean
+}
+
+/// One row of the aggregate: an algorithm's IQM at a Δ, over `tasks`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IqmRow {
+    pub delay: usize,
+    pub algorithm: &'static str,
+    pub tasks: Vec<TaskName>,
+    pub runs: usize,
+    pub iqm: f64,
+    pub interval: (f64, f64),
+}
+
+/// The probability that D2HPG's final return beats a baseline's at a Δ.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImprovementRow {
+    pub delay: usize,
+    pub baseline: &'static str,
+    pub probability: f64,
+    pub interval: (f64, f64),
+}
+
+/// Normalised final returns of `algorithm` at `delay` (fixed, no noise), one list per task.
+fn strata(runs: &[RunResult], algorithm: &str, delay: usize, tasks: &[TaskName]) -> Strata {
+    tasks
+        .iter()
+        .map(|&task| {
+            runs.iter()
+                .filter(|r| {
+                    r.condition.is_table1()
+                        && r.condition.delay == delay
+                        && r.algorithm == algorithm
+                        && r.task == task
+                })
+                .map(|r| normalised(task, r.final_eval().1))
+                .collect()
+        })
+        .collect()
+}
+
+/// Per Δ > 0 of the fixed-delay runs: every algorithm's IQM over the tasks that every
+/// algorithm at that Δ has runs on, and D2HPG's probability of improvement over each other.
+pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<ImprovementRow>) {
+    let table: Vec<&RunResult> = runs.iter().filter(|r| r.condition.is_table1()).collect();
+    let delays: BTreeSet<usize> = table
+        .iter()
+        .map(|r| r.condition.delay)
+        .filter(|&d| d > 0)
+        .collect();
+    let (mut iqms, mut improvements) = (Vec::new(), Vec::new());
+    for delay in delays {
+        let algorithms: Vec<&'static str> = names()
+            .into_iter()
+            .filter(|a| {
+                table
+                    .iter()
+                    .any(|r| r.algorithm == *a && r.condition.delay == delay)
+            })
+            .collect();
+        let tasks: Vec<TaskName> = TaskName::ALL
+            .into_iter()
+            .filter(|&t| {
+                algorithms.iter().all(|a| {
+                    table
+                        .iter()
+                        .any(|r| r.algorithm == *a && r.condition.delay == delay && r.task == t)
+                })
+            })
+            .collect();
+        if tasks.is_empty() {
+            continue;
+        }
+        for (k, &algorithm) in algorithms.iter().enumerate() {
+            let scores = strata(runs, algorithm, delay, &tasks);
+            iqms.push(IqmRow {
+                delay,
+                algorithm,
+                tasks: tasks.clone(),
+                runs: scores.iter().map(Vec::len).sum(),
+                iqm: iqm_of_strata(&scores),
+                interval: bootstrap_interval(&[&scores], reps, (delay * 100 + k) as u64, |g| {
+                    iqm_of_strata(&g[0])
+                }),
+            });
+        }
+        if !algorithms.contains(&"d2hpg") {
+            continue;
+        }
+        let ours = strata(runs, "d2hpg", delay, &tasks);
+        for (k, &baseline) in algorithms.iter().enumerate() {
+            if baseline == "d2hpg" {
+                continue;
+            }
+            let theirs = strata(runs, baseline, delay, &tasks);
+            improvements.push(ImprovementRow {
+                delay,
+                baseline,
+                probability: probability_of_improvement(&ours, &theirs),
+                interval: bootstrap_interval(
+                    &[&ours, &theirs],
+                    reps,
+                    (delay * 1000 + k) as u64,
+                    |g| probability_of_improvement(&g[0], &g[1]),
+                ),
+            });
+        }
+    }
+    (iqms, improvements)
+}
+
+fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: usize) -> String {
+    let mut out = format!(
+        "Normalised score: final return / the paper's delay-free SAC return on the task. IQM over \
+         every run of the tasks listed; 95% stratified-bootstrap intervals ({reps} resamples).\n\n\
+         | Δ | algorithm | tasks | runs | IQM | 95% interval |\n|---|---|---|---:|---:|---|\n"
+    );
+    for row in iqms {
+        let tasks: Vec<String> = row.tasks.iter().map(|t| t.to_string()).collect();
+        out += &format!(
+            "| {} | {} | {} | {} | {:.3} | [{:.3}, {:.3}] |\n",
+            row.delay,
+            display_name(row.algorithm),
+            tasks.join(", "),
+            row.runs,
+            row.iqm,
+            row.interval.0,
+            row.interval.1
+        );
+    }
+    if !improvements.is_empty() {
+        out += "\n| Δ | P(D2HPG > baseline) | baseline | 95% interval |\n|---|---:|---|---|\n";
+        for row in improvements {
+            out += &format!(
+                "| {} | {:.3} | {} | [{:.3}, {:.3}] |\n",
+                row.delay,
+                row.probability,
+                display_name(row.baseline),
+                row.interval.0,
+                row.interval.1
+            );
+        }
+    }
+    out
+}
+
+fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
+    let mut out = String::from("statistic,delay,algorithm,baseline,runs,value,low,high\n");
+    for r in iqms {
+        out += &format!(
+            "iqm,{},{},,{},{:.6},{:.6},{:.6}\n",
+            r.delay, r.algorithm, r.runs, r.iqm, r.interval.0, r.interval.1
+        );
+    }
+    for r in improvements {
+        out += &format!(
+            "probability_of_improvement,{},d2hpg,{},,{:.6},{:.6},{:.6}\n",
+            r.delay, r.baseline, r.probability, r.interval.0, r.interval.1
+        );
+    }
+    out
+}
+
+/// Every evaluation of every run, one row each: what pandas or rliable load directly.
+fn long_csv(runs: &[RunResult]) -> String {
+    let mut out = String::from("algorithm,task,delay,delay_kind,actuator_noise,seed,step,return\n");
+    for r in runs {
+        for e in &r.evals {
+            out += &format!(
+                "{},{},{},{},{},{},{},{}\n",
+                r.algorithm,
+                r.task,
+                r.condition.delay,
+                r.condition.delay_kind(),
+                r.condition.actuator_noise,
+                r.seed,
+                e.step,
+                e.return_mean
+            );
+        }
+    }
+    out
+}
+
+/// What [`write_report`] wrote.
+#[derive(Debug, Clone)]
+pub struct Report {
+    pub runs: usize,
+    /// Runs without an evaluation yet.
+    pub skipped: usize,
+    /// `table1.md`'s text.
+    pub table_markdown: String,
+    pub aggregate_markdown: String,
+    pub files: Vec<PathBuf>,
+}
+
+/// Reads the runs under `inputs` and writes into `out`: `table1.md`, `table1.tex`,
+/// `table1.csv`, `aggregate.md`, `aggregate.csv`, `returns.csv` and the figures.
+pub fn write_report(inputs: &[PathBuf], out: &Path, reps: usize) -> Result<Report, ReportError> {
+    if reps < 100 {
+        return Err(ReportError::NoResults(format!(
+            "--bootstrap {reps}: at least 100 resamples are needed for a 95% interval"
+        )));
+    }
+    let (runs, skipped) = load_runs(inputs)?;
+    std::fs::create_dir_all(out).map_err(|e| ReportError::Io {
+        path: out.display().to_string(),
+        message: e.to_string(),
+    })?;
+    let table = table1(&runs);
+    let (iqms, improvements) = aggregate(&runs, reps);
+    let steps: Vec<String> = table.final_steps().iter().map(u64::to_string).collect();
+    let markdown = format!(
+        "{}\nMean ± std over seeds (their number in brackets) of the final evaluation (at step {}); \
+         the best of each Δ in bold. Paper: Table 1 of the DHRL paper (1M steps, 5 seeds).{}\n",
+        table.markdown(),
+        steps.join(", "),
+        if table.mixed() {
+            " †: the cell pools runs that differ in more than their seed (other settings, \
+             budgets or algorithm fields)."
+        } else {
+            ""
+        }
+    );
+    let aggregate_markdown = aggregate_markdown(&iqms, &improvements, reps);
+    let mut files = Vec::new();
+    for (name, text) in [
+        ("table1.md", markdown.clone()),
+        ("table1.tex", table.latex()),
+        ("table1.csv", table.csv()),
+        ("aggregate.md", aggregate_markdown.clone()),
+        ("aggregate.csv", aggregate_csv(&iqms, &improvements)),
+        ("returns.csv", long_csv(&runs)),
+    ] {
+        let path = out.join(name);
+        write_atomically(&path, &text)?;
+        files.push(path);
+    }
+    files.extend(figures::all(&runs, out)?);
+    Ok(Report {
+        runs: runs.len(),
+        skipped,
+        table_markdown: markdown,
+        aggregate_markdown,
+        files,
+    })
+}

@@ -1,0 +1,134 @@
+//! The runs a report covers: run folders (`config.toml` + `evals.csv`), or sweep folders, whose
+//! `runs/<id>/` folders with an evaluation are taken.
+use std::path::{Path, PathBuf};
+
+use super::ReportError;
+use crate::tasks::TaskName;
+use crate::train::{EvalRow, TrainConfig, read_evals};
+
+/// What a run's configuration puts it under: Table 1's cells are fixed delays without noise.
+#[derive(Debug, Clone, Copy, PartialEq, PartialOrd)]
+pub struct Condition {
+    /// Δ, or the bound of random delays.
+    pub delay: usize,
+    pub random_delay: bool,
+    pub actuator_noise: f64,
+}
+
+impl Condition {
+    pub fn is_table1(&self) -> bool {
+        !self.random_delay && self.actuator_noise == 0.0
+    }
+
+    /// `fixed` or `random`, as the long-format CSV writes it.
+    pub fn delay_kind(&self) -> &'static str {
+        if self.random_delay { "random" } else { "fixed" }
+    }
+}
+
+/// One run's evaluations.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    pub folder: PathBuf,
+    pub task: TaskName,
+    pub algorithm: &'static str,
+    pub condition: Condition,
+    pub seed: u64,
+    /// The run's whole configuration but its seed (runs differing in more than the seed are
+    /// other settings).
+    pub setting: String,
+    pub evals: Vec<EvalRow>,
+}
+
+impl RunResult {
+    /// The last evaluation's step and mean return.
+    pub fn final_eval(&self) -> (u64, f64) {
+        let last = self
+            .evals
+            .last()
+            .expect("runs without evaluations are skipped");
+        (last.step, last.return_mean)
+    }
+
+    /// Wall-clock seconds per million environment steps, from the last evaluation.
+    pub fn seconds_per_million(&self) -> Option<f64> {
+        let last = self.evals.last()?;
+        (last.step > 0).then(|| last.wall_seconds / last.step as f64 * 1e6)
+    }
+}
+
+/// Every run under `inputs`, in the order given (a sweep's in manifest order). A folder that
+/// is neither a run nor a sweep is an error; a run without an evaluation yet is skipped.
+pub fn load_runs(inputs: &[PathBuf]) -> Result<(Vec<RunResult>, usize), ReportError> {
+    let mut runs = Vec::new();
+    let mut skipped = 0;
+    for input in inputs {
+        for folder in run_folders(input)? {
+            match load_run(&folder)? {
+                Some(run) => runs.push(run),
+                None => skipped += 1,
+            }
+        }
+    }
+    if runs.is_empty() {
+        return Err(ReportError::NoResults(format!(
+            "none of {} holds a run with an evaluation (a run folder has config.toml and \
+             evals.csv; a sweep folder has manifest.jsonl and runs/)",
+            inputs
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    Ok((runs, skipped))
+}
+
+fn run_folders(input: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    if input.join("config.toml").is_file() {
+        return Ok(vec![input.to_path_buf()]);
+    }
+    if input.join("manifest.jsonl").is_file() {
+        let sweep = crate::sweep::Sweep::open(input)?;
+        return Ok(sweep
+            .runs
+            .iter()
+            .map(|r| sweep.run_dir(r))
+            .filter(|d| d.join("config.toml").is_file())
+            .collect());
+    }
+    Err(ReportError::NoResults(format!(
+        "{} is neither a run folder (config.toml, evals.csv) nor a sweep folder (manifest.jsonl)",
+        input.display()
+    )))
+}
+
+fn load_run(folder: &Path) -> Result<Option<RunResult>, ReportError> {
+    let config = TrainConfig::from_toml_file(&folder.join("config.toml"))?;
+    if !folder.join("evals.csv").is_file() {
+        return Ok(None);
+    }
+    let evals = read_evals(folder)?;
+    if evals.is_empty() {
+        return Ok(None);
+    }
+    let delay = config.validate().map_err(crate::train::TrainError::from)?;
+    let delay = config.delay.random_bound().unwrap_or(delay);
+    Ok(Some(RunResult {
+        folder: folder.to_path_buf(),
+        task: config.task,
+        algorithm: config.algo.name(),
+        condition: Condition {
+            delay,
+            random_delay: config.delay.random_delay,
+            actuator_noise: config.delay.actuator_noise,
+        },
+        seed: config.seed,
+        setting: toml::to_string(&TrainConfig {
+            seed: 0,
+            ..config.clone()
+        })
+        .expect("a loaded configuration serialises"),
+        evals,
+    }))
+}
