@@ -2,8 +2,8 @@
 use std::collections::BTreeMap;
 
 use dhrl::delay::{
-    BatchExtras, CpuDelayLayer, DelayConfig, DelayDevice, DelayError, DelayLayer, GpuDelayLayer,
-    MAX_DELAY, RecordBatch, ReplayStore, StepInput, Transitions, WarmupActions,
+    BatchExtras, CpuDelayLayer, DelayConfig, DelayDevice, DelayError, DelayLayer, DelayedBatch,
+    GpuDelayLayer, MAX_DELAY, RecordBatch, ReplayStore, StepInput, Transitions, WarmupActions,
 };
 use dhrl::sim::{BatchConfig, BatchedEnv};
 use dhrl::tasks::TaskName;
@@ -246,7 +246,7 @@ fn run_cpu(
         let produced = fake.step(&actions, &mut log);
         let input = produced.input(&actions);
         layer.step(&input).unwrap();
-        replay.push(layer.records()).unwrap();
+        replay.push(layer.records(), &[]).unwrap();
         key_transitions(&layer.transitions(), aug, obs_dim, act_dim, &mut emitted);
         for c in 0..copies {
             let ep = log[c].last().unwrap();
@@ -803,4 +803,78 @@ fn replay_store_survives_save_and_load() {
             replay.sample(16, &mut b).unwrap()
         );
     }
+}
+
+/// A copy whose simulation diverges (HalfCheetah sliding at 1,000 m/s: MuJoCo finds a bad
+/// qpos/qvel/qacc in the 4th step and resets the state to `qpos0`) ends its episode there,
+/// truncated, with reward 0 and flagged; the other copy goes on. The replay keeps the steps
+/// before as context and learns from them, but never from the diverged step, whose "next
+/// state" is MuJoCo's reset state (without the flag it would be sampled).
+#[test]
+fn a_diverged_copy_ends_its_episode_and_its_last_step_stays_out_of_the_replay() {
+    let batch = BatchConfig {
+        task: TaskName::HalfCheetah,
+        envs: 2,
+        threads: 1,
+        seed: 5,
+        actuator_noise: 0.0,
+    };
+    let delay = DelayConfig::fixed(2);
+    let mut delayed = DelayedBatch::new(&batch, &delay, DelayDevice::Cpu, 1).unwrap();
+    let model = dhrl::sim::TaskModel::load(TaskName::HalfCheetah).unwrap();
+    let mut sliding = vec![0.0; model.nv];
+    sliding[0] = 1000.0;
+    delayed
+        .env_mut()
+        .set_state(0, &model.init_qpos, &sliding)
+        .unwrap();
+    delayed
+        .env_mut()
+        .set_state(1, &model.init_qpos, &vec![0.0; model.nv])
+        .unwrap();
+    let observations = delayed.env().observations().to_vec();
+    delayed.layer_mut().reset(&observations).unwrap();
+    let layout = delayed.layout();
+    let mut flagged = ReplayStore::new(layout, 1000).unwrap();
+    let mut unflagged = ReplayStore::new(layout, 1000).unwrap();
+    let actions = vec![0.0f32; 2 * model.action_low.len()];
+    let mut diverged_at = None;
+    for step in 1..=8 {
+        delayed.step(&actions).unwrap();
+        let env = delayed.env();
+        if env.diverged()[0] == 1 {
+            assert_eq!(diverged_at, None, "one divergence");
+            diverged_at = Some(step);
+            assert_eq!(env.truncated()[0], 1, "a diverged episode ends truncated");
+            assert_eq!(env.terminated()[0], 0);
+            assert_eq!(env.rewards()[0], 0.0, "the diverged step earns nothing");
+            assert_eq!(env.episode_lengths()[0], step);
+        }
+        assert_eq!(env.diverged()[1], 0, "the other copy is stable");
+        assert_eq!(env.truncated()[1], 0);
+        flagged
+            .push(delayed.layer().records(), env.diverged())
+            .unwrap();
+        unflagged.push(delayed.layer().records(), &[]).unwrap();
+    }
+    assert_eq!(
+        diverged_at,
+        Some(4),
+        "the sliding copy diverges in its 4th step"
+    );
+    let taus = |replay: &ReplayStore| -> Vec<u32> {
+        let all = replay.all();
+        (0..all.len())
+            .filter(|&k| all.copy[k] == 0 && all.episode[k] == 0)
+            .map(|k| all.tau[k])
+            .collect()
+    };
+    // Steps τ = 0..3 of the diverged episode; with Δ = 2, τ ≥ 2 are transitions: τ = 2 (its
+    // next state s_3 is the last real one) is learnt from, τ = 3 (diverged) is not.
+    assert_eq!(taus(&flagged), vec![2]);
+    assert_eq!(
+        taus(&unflagged),
+        vec![2, 3],
+        "without the flag τ = 3 would be sampled"
+    );
 }

@@ -714,3 +714,116 @@ fn a_non_finite_loss_stops_the_run_and_keeps_the_last_checkpoint() {
             .unwrap();
     assert_eq!(state["env_steps"], 500, "the last good checkpoint");
 }
+
+/// A full disk (a tmpfs with room for one checkpoint and a half: the second one cannot be
+/// written beside the first) stops the run with an error that names the step, the cause and
+/// the checkpoint kept; no partial checkpoint is left, and the run, moved to a disk with room,
+/// resumes to exactly the run that had room all along. Needs root to mount the tmpfs (as CI
+/// has); elsewhere it says so and returns.
+#[test]
+fn a_full_disk_fails_the_checkpoint_clearly_and_keeps_the_previous_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = |steps: &str, out: &Path| -> Vec<String> {
+        let mut args = vec!["train", "--steps", steps];
+        args.extend_from_slice(&SMALL);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        args.into_iter().map(String::from).collect()
+    };
+    // The size of a run folder with one checkpoint (SMALL checkpoints every 500 steps).
+    let measured = dir.path().join("measured");
+    ok(Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(args("500", &measured))
+        .output()
+        .unwrap());
+    let size: u64 = walk_sizes(&measured);
+    let disk = dir.path().join("disk");
+    std::fs::create_dir(&disk).unwrap();
+    let mount = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", &format!("size={}", size * 3 / 2)])
+        .arg("tmpfs")
+        .arg(&disk)
+        .output()
+        .unwrap();
+    if !mount.status.success() {
+        eprintln!(
+            "a_full_disk_fails_the_checkpoint_clearly_and_keeps_the_previous_one: cannot mount a \
+             tmpfs here ({}): skipped",
+            String::from_utf8_lossy(&mount.stderr).trim()
+        );
+        return;
+    }
+    struct Unmount<'a>(&'a Path);
+    impl Drop for Unmount<'_> {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(self.0).status();
+        }
+    }
+    let _unmount = Unmount(&disk);
+    let cramped = disk.join("run");
+    let out = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(args("1500", &cramped))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "the run had room after all: {stderr}"
+    );
+    for expected in [
+        "writing the checkpoint of step 1000",
+        "No space left on device",
+        "checkpoint is intact",
+        "--resume",
+    ] {
+        assert!(stderr.contains(expected), "'{expected}' not in: {stderr}");
+    }
+    assert!(
+        !cramped.join("checkpoint.partial").exists(),
+        "the partial checkpoint is removed"
+    );
+    let saved = std::fs::read_to_string(cramped.join("checkpoint/state.json")).unwrap();
+    let saved: serde_json::Value = serde_json::from_str(&saved).unwrap();
+    assert_eq!(saved["env_steps"].as_u64(), Some(500));
+    // Moved to a disk with room, it resumes to the run that never ran out.
+    let moved = dir.path().join("moved");
+    assert!(
+        Command::new("cp")
+            .arg("-a")
+            .arg(&cramped)
+            .arg(&moved)
+            .status()
+            .unwrap()
+            .success()
+    );
+    ok(dhrl(&["train", "--resume", moved.to_str().unwrap()]));
+    let whole = dir.path().join("whole");
+    ok(Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(args("1500", &whole))
+        .output()
+        .unwrap());
+    for file in ["evals.csv", "train.csv"] {
+        for name in common::reproducible_columns(&whole.join(file)) {
+            assert_eq!(
+                common::column(&moved.join(file), &name),
+                common::column(&whole.join(file), &name),
+                "{file} column {name}"
+            );
+        }
+    }
+}
+
+/// Bytes of every file under `dir`.
+fn walk_sizes(dir: &Path) -> u64 {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            let meta = e.metadata().unwrap();
+            if meta.is_dir() {
+                walk_sizes(&e.path())
+            } else {
+                meta.len()
+            }
+        })
+        .sum()
+}

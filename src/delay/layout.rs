@@ -9,6 +9,9 @@ pub const RECORD_TERMINATED: u32 = 1;
 pub const RECORD_TRUNCATED: u32 = 2;
 /// Flag: this record only carries the last state `s_T` of a finished episode (no action).
 pub const RECORD_FINAL_STATE: u32 = 4;
+/// Set by the replay store (not the delay layers) on the last step of an episode that the
+/// simulation's divergence ended: that step is no transition to learn from.
+pub const RECORD_DIVERGED: u32 = 8;
 
 /// Which step a record belongs to. Identical bytes on the CPU and in WGSL.
 #[repr(C)]

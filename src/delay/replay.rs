@@ -4,7 +4,9 @@
 use rand::Rng;
 
 use super::cpu::{BatchExtras, Transitions};
-use super::layout::{DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED};
+use super::layout::{
+    DelayLayout, RECORD_DIVERGED, RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED,
+};
 use super::records::RecordBatch;
 use crate::snapshot::{SnapshotError, read_section, write_section};
 
@@ -145,7 +147,10 @@ impl ReplayStore {
     }
 
     /// Appends the records of one step of the delay layer.
-    pub fn push(&mut self, records: &RecordBatch) -> Result<(), ReplayError> {
+    /// Stores the records one step completed. `diverged` (`[N]`) flags the copies whose
+    /// episode that step ended by the simulation's divergence: their last step is kept as the
+    /// context of the steps before it but never sampled as a transition.
+    pub fn push(&mut self, records: &RecordBatch, diverged: &[u32]) -> Result<(), ReplayError> {
         if records.layout != self.layout {
             return Err(ReplayError::LayoutMismatch {
                 found: records.layout,
@@ -156,10 +161,17 @@ impl ReplayStore {
         for record in records.iter() {
             let c = record.copy;
             let slot = c * self.segment + self.head[c];
+            let last_step = record.meta.flags & RECORD_TRUNCATED != 0 && !record.is_final_state();
+            let ended_by_divergence = last_step && diverged.get(c).is_some_and(|&d| d != 0);
             self.meta[slot] = StepMeta {
                 episode: record.meta.episode,
                 tau: record.meta.tau,
-                flags: record.meta.flags,
+                flags: record.meta.flags
+                    | if ended_by_divergence {
+                        RECORD_DIVERGED
+                    } else {
+                        0
+                    },
             };
             let row = &mut self.data[slot * stride..(slot + 1) * stride];
             row[..self.layout.obs_dim].copy_from_slice(record.state);
@@ -181,7 +193,7 @@ impl ReplayStore {
     fn is_complete(&self, c: usize, i: usize) -> bool {
         let d = self.layout.delay;
         let m = self.meta[self.slot(c, i)];
-        if m.flags & RECORD_FINAL_STATE != 0
+        if m.flags & (RECORD_FINAL_STATE | RECORD_DIVERGED) != 0
             || (m.tau as usize) < d
             || i < d
             || i + 1 >= self.filled[c]

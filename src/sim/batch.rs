@@ -39,6 +39,7 @@ struct CopyOutputs<'a> {
     reward: &'a mut f32,
     terminated: &'a mut u32,
     truncated: &'a mut u32,
+    diverged: &'a mut u32,
     episode_return: &'a mut f32,
     episode_length: &'a mut u32,
 }
@@ -57,6 +58,9 @@ pub struct BatchedEnv {
     rewards: Vec<f32>,
     terminated: Vec<u32>,
     truncated: Vec<u32>,
+    /// Copies whose episode the last step ended because the simulation diverged
+    /// ([`super::StepOutcome::diverged`]; their `truncated` is set too).
+    diverged: Vec<u32>,
     episode_returns: Vec<f32>,
     episode_lengths: Vec<u32>,
 }
@@ -139,6 +143,8 @@ impl BatchedEnv {
         self.rewards.clone_from(&snapshot.rewards);
         self.terminated.clone_from(&snapshot.terminated);
         self.truncated.clone_from(&snapshot.truncated);
+        // Snapshots are taken between steps, when a divergence has been dealt with.
+        self.diverged.fill(0);
         self.episode_returns.clone_from(&snapshot.episode_returns);
         self.episode_lengths.clone_from(&snapshot.episode_lengths);
         Ok(())
@@ -192,6 +198,7 @@ impl BatchedEnv {
             rewards: vec![0.0; n],
             terminated: vec![0; n],
             truncated: vec![0; n],
+            diverged: vec![0; n],
             episode_returns: vec![0.0; n],
             episode_lengths: vec![0; n],
         };
@@ -218,6 +225,7 @@ impl BatchedEnv {
         self.rewards.fill(0.0);
         self.terminated.fill(0);
         self.truncated.fill(0);
+        self.diverged.fill(0);
     }
 
     /// Applies `actions` (`[N, act_dim]`, row `i` to copy `i`) and steps every copy once.
@@ -245,19 +253,32 @@ impl BatchedEnv {
                 self.rewards.par_iter_mut(),
                 self.terminated.par_iter_mut(),
                 self.truncated.par_iter_mut(),
+                self.diverged.par_iter_mut(),
                 self.episode_returns.par_iter_mut(),
                 self.episode_lengths.par_iter_mut(),
             )
                 .into_par_iter()
                 .with_min_len(min_len)
                 .for_each(
-                    |(copy, action, obs, final_obs, reward, terminated, truncated, ret, len)| {
+                    |(
+                        copy,
+                        action,
+                        obs,
+                        final_obs,
+                        reward,
+                        terminated,
+                        truncated,
+                        diverged,
+                        ret,
+                        len,
+                    )| {
                         let out = CopyOutputs {
                             obs,
                             final_obs,
                             reward,
                             terminated,
                             truncated,
+                            diverged,
                             episode_return: ret,
                             episode_length: len,
                         };
@@ -344,6 +365,11 @@ impl BatchedEnv {
     pub fn truncated(&self) -> &[u32] {
         &self.truncated
     }
+
+    /// Copies whose episode the last step ended because the simulation diverged.
+    pub fn diverged(&self) -> &[u32] {
+        &self.diverged
+    }
     /// `[N]`: the undiscounted return of the episode that ended this step (where done).
     pub fn episode_returns(&self) -> &[f32] {
         &self.episode_returns
@@ -374,6 +400,7 @@ impl EnvCopy {
         *out.reward = outcome.reward as f32;
         *out.terminated = outcome.terminated as u32;
         *out.truncated = outcome.truncated as u32;
+        *out.diverged = outcome.diverged as u32;
         if outcome.done() {
             write_f32(out.final_obs, &self.obs);
             *out.episode_return = self.episode_return as f32;

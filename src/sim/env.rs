@@ -14,8 +14,14 @@ pub struct StepOutcome {
     pub reward: f64,
     /// The MDP ended (no bootstrapping).
     pub terminated: bool,
-    /// The time limit ended the episode (bootstrap from the last state).
+    /// The time limit ended the episode (bootstrap from the last state), or the simulation
+    /// diverged.
     pub truncated: bool,
+    /// MuJoCo found the state unstable (a bad qpos, qvel or qacc: a NaN or a value beyond
+    /// `mjMAXVAL`) and reset it to `qpos0` in the middle of this step: the step's next state
+    /// and reward are not the task's, so the episode ends here, truncated, with reward 0, and
+    /// the step is no transition to learn from.
+    pub diverged: bool,
 }
 
 impl StepOutcome {
@@ -154,22 +160,43 @@ impl Env {
     pub fn step(&mut self, action: &[f64], obs: &mut [f64]) -> StepOutcome {
         let task = self.model.task;
         let before = self.progress;
+        let resets_before = self.instability_resets();
         self.data.ctrl_mut().copy_from_slice(action);
         for _ in 0..task.frame_skip {
             self.data.step();
         }
         self.data.rne_post_constraint();
         self.progress = self.read_progress();
+        self.observe(obs);
+        self.elapsed += 1;
+        if self.instability_resets() > resets_before {
+            return StepOutcome {
+                reward: 0.0,
+                terminated: false,
+                truncated: true,
+                diverged: true,
+            };
+        }
         let velocity = (self.progress - before) / self.model.dt;
         let ctrl_cost = task.ctrl_cost_weight * action.iter().map(|a| a * a).sum::<f64>();
         let reward = task.forward_weight * velocity + task.healthy_reward - ctrl_cost;
-        self.observe(obs);
-        self.elapsed += 1;
         StepOutcome {
             reward,
             terminated: (task.terminated)(&self.data),
             truncated: self.elapsed >= MAX_EPISODE_STEPS,
+            diverged: false,
         }
+    }
+
+    /// How often MuJoCo has reset this copy's state for instability (its bad-qpos, bad-qvel and
+    /// bad-qacc warning counters together).
+    fn instability_resets(&self) -> i64 {
+        use mujoco_rs::mujoco_c::mjtWarning::{mjWARN_BADQACC, mjWARN_BADQPOS, mjWARN_BADQVEL};
+        let warnings = self.data.warning();
+        [mjWARN_BADQPOS, mjWARN_BADQVEL, mjWARN_BADQACC]
+            .iter()
+            .map(|&w| i64::from(warnings[w as usize].number))
+            .sum()
     }
 
     /// The coordinate whose change per `dt` is the forward velocity of the reward.

@@ -24,6 +24,16 @@ pub fn begin(run: &Path) -> Result<PathBuf, TrainError> {
     Ok(partial)
 }
 
+/// Removes a partial checkpoint whose writing failed (it would hold the space a full disk
+/// needs back).
+pub fn discard_partial(run: &Path) -> Result<(), TrainError> {
+    let partial = run.join(PARTIAL);
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).map_err(io_error(&partial))?;
+    }
+    Ok(())
+}
+
 /// Makes the partial checkpoint the current one.
 pub fn commit(run: &Path) -> Result<(), TrainError> {
     let (partial, current, previous) =

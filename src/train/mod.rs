@@ -63,6 +63,17 @@ pub enum TrainError {
         update: u64,
         env_steps: u64,
     },
+    #[error(
+        "writing the checkpoint of step {env_steps} into {run} failed: {cause}; {kept} (free \
+         space or make the folder writable, then `dhrl train --resume {run}`)"
+    )]
+    CheckpointFailed {
+        run: String,
+        env_steps: u64,
+        cause: Box<TrainError>,
+        /// What is left to resume from.
+        kept: String,
+    },
     #[error("the agent reported a statistic `{0}` it did not declare in stat_names")]
     UndeclaredStatistic(&'static str),
 }

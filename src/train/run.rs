@@ -63,6 +63,9 @@ struct LoopState {
     logged_steps: u64,
     logged_updates: u64,
     logged_wall: f64,
+    /// Training episodes the simulation's divergence ended (their last step not learnt from).
+    #[serde(default)]
+    diverged_episodes: u64,
 }
 
 const EVAL_HEADER: [&str; 6] = [
@@ -73,12 +76,13 @@ const EVAL_HEADER: [&str; 6] = [
     "length_mean",
     "episodes",
 ];
-const TRAIN_HEADER: [&str; 5] = [
+const TRAIN_HEADER: [&str; 6] = [
     "step",
     "updates",
     "wall_seconds",
     "env_steps_per_sec",
     "updates_per_sec",
+    "diverged_episodes",
 ];
 
 struct Trainer {
@@ -229,6 +233,7 @@ impl Trainer {
             logged_steps: 0,
             logged_updates: 0,
             logged_wall: 0.0,
+            diverged_episodes: 0,
         };
         Ok(Trainer {
             config,
@@ -270,7 +275,31 @@ impl Trainer {
         Ok(())
     }
 
+    /// Writes a checkpoint, or fails with [`TrainError::CheckpointFailed`] (a full disk, an
+    /// unwritable folder), the partial one removed and the previous one intact.
     fn save_checkpoint(&mut self) -> Result<(), TrainError> {
+        self.write_checkpoint().map_err(|cause| {
+            let partial_removed = checkpoint::discard_partial(&self.run).is_ok();
+            let kept = match checkpoint::latest(&self.run) {
+                Some(previous) => {
+                    format!("the previous checkpoint {} is intact", previous.display())
+                }
+                None => "there is no earlier checkpoint".into(),
+            };
+            TrainError::CheckpointFailed {
+                run: self.run.display().to_string(),
+                env_steps: self.state.env_steps,
+                cause: Box::new(cause),
+                kept: if partial_removed {
+                    kept
+                } else {
+                    format!("{kept} (the partial one could not be removed either)")
+                },
+            }
+        })
+    }
+
+    fn write_checkpoint(&mut self) -> Result<(), TrainError> {
         let dir = checkpoint::begin(&self.run)?;
         write_json(&dir.join("state.json"), &self.state)?;
         write_json(&dir.join("env.json"), &self.batch.env().snapshot())?;
@@ -369,6 +398,7 @@ impl Trainer {
             format!("{:.3}", s.wall_seconds),
             format!("{:.1}", (s.env_steps - s.logged_steps) as f64 / seconds),
             format!("{:.1}", (s.updates - s.logged_updates) as f64 / seconds),
+            s.diverged_episodes.to_string(),
         ];
         row.extend(stat_means(&s.stat_sums, &s.stat_counts));
         (s.logged_steps, s.logged_updates, s.logged_wall) =
@@ -428,7 +458,21 @@ impl Trainer {
         while self.state.env_steps < c.steps {
             let actions = self.choose_actions()?;
             self.batch.step(&actions)?;
-            self.replay.push(self.batch.layer().records())?;
+            let diverged = self.batch.env().diverged();
+            self.replay.push(self.batch.layer().records(), diverged)?;
+            let count = diverged.iter().filter(|&&d| d != 0).count() as u64;
+            if count > 0 {
+                self.state.diverged_episodes += count;
+                bar.suspend(|| {
+                    eprintln!(
+                        "warning: step {}: {count} training episode(s) ended because MuJoCo \
+                         found the simulation unstable (a bad qpos, qvel or qacc) and reset it; \
+                         the step is kept out of the replay ({} so far, in train.csv)",
+                        self.state.env_steps + c.envs as u64,
+                        self.state.diverged_episodes
+                    )
+                });
+            }
             self.state.env_steps += c.envs as u64;
             self.state.wall_seconds = wall_at_start + session_start.elapsed().as_secs_f64();
             if self.state.env_steps >= c.warmup_steps {
