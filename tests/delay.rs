@@ -143,8 +143,17 @@ impl FakeBatch {
 const LOW: [f64; 2] = [-1.0, -2.0];
 const HIGH: [f64; 2] = [1.0, 2.0];
 
+/// A fixed delay with random warm-up actions (not the default zeros), so that the actions
+/// executed before the first observation differ from step to step and copy to copy.
+fn fixed(delay: usize) -> DelayConfig {
+    DelayConfig {
+        warmup: WarmupActions::Random,
+        ..DelayConfig::fixed(delay)
+    }
+}
+
 fn cpu_layer(delay: usize, copies: usize, obs_dim: usize) -> CpuDelayLayer {
-    CpuDelayLayer::new(&DelayConfig::fixed(delay), copies, obs_dim, &LOW, &HIGH, 7).unwrap()
+    CpuDelayLayer::new(&fixed(delay), copies, obs_dim, &LOW, &HIGH, 7).unwrap()
 }
 
 /// `x_t` as the contract defines it, from the undelayed log.
@@ -407,7 +416,7 @@ fn warmup_actions_are_random_in_bounds_or_zeros() {
     assert!(actions.iter().any(|&a| a != 0.0));
     let config = DelayConfig {
         warmup: WarmupActions::Zeros,
-        ..DelayConfig::fixed(3)
+        ..fixed(3)
     };
     let mut zeros = CpuDelayLayer::new(&config, 4, 2, &LOW, &HIGH, 1).unwrap();
     zeros.reset(&[0.0; 8]).unwrap();
@@ -703,7 +712,7 @@ fn gpu_layer(
 fn gpu_matches_cpu_on_synthetic_episodes() {
     for delay in [0, 1, 4, 9] {
         let copies = 37;
-        let config = DelayConfig::fixed(delay);
+        let config = fixed(delay);
         let Some(mut gpu) = gpu_layer(&config, copies, 3, &LOW, &HIGH) else {
             return;
         };
@@ -754,7 +763,7 @@ fn gpu_matches_cpu_on_hopper() {
     .unwrap();
     let (low, high) = env.action_bounds();
     let (low, high) = (low.to_vec(), high.to_vec());
-    let config = DelayConfig::fixed(delay);
+    let config = fixed(delay);
     let Some(mut gpu) = gpu_layer(&config, copies, env.obs_dim(), &low, &high) else {
         return;
     };
@@ -819,7 +828,7 @@ fn a_diverged_copy_ends_its_episode_and_its_last_step_stays_out_of_the_replay() 
         seed: 5,
         actuator_noise: 0.0,
     };
-    let delay = DelayConfig::fixed(2);
+    let delay = fixed(2);
     let mut delayed = DelayedBatch::new(&batch, &delay, DelayDevice::Cpu, 1).unwrap();
     let model = dhrl::sim::TaskModel::load(TaskName::HalfCheetah).unwrap();
     let mut sliding = vec![0.0; model.nv];

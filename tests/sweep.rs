@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use dhrl::delay::WarmupActions;
 use dhrl::sweep::{Experiment, ManifestRun, RunOutcome, RunState, Sweep};
 
 fn dhrl(args: &[&str]) -> Output {
@@ -63,6 +64,17 @@ fn presets_expand_into_the_papers_grid_with_stable_ids() {
             .iter()
             .all(|r| r.config.steps == 1_000_000 && r.config.eval_every == 5_000)
     );
+    for preset in ["table1", "noise", "random-delay", "ablation", "runtime"] {
+        assert!(
+            Experiment::preset(preset)
+                .unwrap()
+                .expand()
+                .unwrap()
+                .iter()
+                .all(|r| r.config.delay.warmup == WarmupActions::Zeros),
+            "{preset}: zero warm-up actions, as the paper's numbers need (README, Warm-up)"
+        );
+    }
     let noise = Experiment::preset("noise").unwrap().expand().unwrap();
     assert_eq!(
         noise.len(),
@@ -97,6 +109,46 @@ fn presets_expand_into_the_papers_grid_with_stable_ids() {
             "{} / {}",
             b.id,
             a.id
+        );
+    }
+}
+
+/// A quick look at a preset: restricted, scaled (steps and checkpoint interval) and evaluated
+/// more often, as the reduced reproduction in the README was planned.
+#[test]
+fn a_preset_is_restricted_scaled_and_evaluated_more_often() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("quick");
+    let printed = ok(&dhrl(&[
+        "sweep",
+        "plan",
+        "table1",
+        "--out",
+        out.to_str().unwrap(),
+        "--tasks",
+        "inverted-pendulum",
+        "--algos",
+        "bpql,d2hpg",
+        "--delays",
+        "5,20",
+        "--seeds",
+        "0",
+        "--scale",
+        "0.01",
+        "--eval-every",
+        "1000",
+        "--cost-updates",
+        "0",
+    ]));
+    assert!(printed.contains("4 runs planned (4 new"), "{printed}");
+    let sweep = Sweep::open(&out).unwrap();
+    for run in &sweep.runs {
+        let c = &run.config;
+        assert_eq!(
+            (c.steps, c.eval_every, c.checkpoint_every, c.eval_episodes),
+            (10_000, 1_000, 500, 10),
+            "{}",
+            run.id
         );
     }
 }
@@ -387,12 +439,18 @@ fn a_slurm_array_requeues_stopped_tasks_and_ends_like_the_local_runner() {
         "scancel",
         &["--batch", "--signal=USR1", &format!("{job}_1")],
     );
-    // Slurm holds a requeued task back for a while (BeginTime); the test releases it.
+    // Slurm holds a requeued task back for a while (BeginTime); the test releases it. The array
+    // has ended when every run has finished and Slurm lists none of its tasks: an empty answer
+    // alone is not enough (squeue fails with no output when slurmctld is slow to answer, and a
+    // requeued task can be between two states).
     let start = Instant::now();
     loop {
-        let queue = slurm.command("squeue", &["-h", "-j", &job, "-o", "%i %T %r"]);
-        let queue = String::from_utf8_lossy(&queue.stdout).into_owned();
-        if queue.trim().is_empty() {
+        let answer = slurm.command("squeue", &["-h", "-j", &job, "-o", "%i %T %r"]);
+        let queue = String::from_utf8_lossy(&answer.stdout).into_owned();
+        if answer.status.success()
+            && queue.trim().is_empty()
+            && sweep.runs.iter().all(|run| sweep.finished(run))
+        {
             break;
         }
         for line in queue.lines().filter(|l| l.ends_with("PENDING BeginTime")) {
@@ -404,7 +462,8 @@ fn a_slurm_array_requeues_stopped_tasks_and_ends_like_the_local_runner() {
         }
         assert!(
             start.elapsed() < Duration::from_secs(600),
-            "the array has not ended after 10 min: {queue}\n{}",
+            "the array has not ended after 10 min: {queue}{}\n{}",
+            String::from_utf8_lossy(&answer.stderr),
             slurm.logs()
         );
         std::thread::sleep(Duration::from_millis(200));

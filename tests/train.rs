@@ -326,7 +326,7 @@ fn every_delayed_algorithm_trains_on_every_task_and_delay_option() {
         &["--delay", "1", "--action-delay", "2"],
         &["--random-delay", "--max-delay", "3"],
         &["--delay", "2", "--actuator-noise", "0.1"],
-        &["--delay", "2", "--warmup", "zeros"],
+        &["--delay", "2", "--warmup", "random"],
     ];
     let algos = [
         "naive-sac",
@@ -594,6 +594,9 @@ fn training_on_the_gpu_delay_layer_equals_the_cpu_layer() {
                 "2",
                 "--action-delay",
                 "1",
+                // Random warm-up actions, so the layers' warm-up streams are compared too.
+                "--warmup",
+                "random",
                 "--delay-device",
                 device,
             ];

@@ -49,6 +49,10 @@ pub struct PlanArgs {
     /// Environment steps of every run (after --scale).
     #[arg(long)]
     steps: Option<u64>,
+    /// Environment steps between evaluations of every run (the presets: 5,000), for
+    /// learning curves of a shortened sweep.
+    #[arg(long, value_name = "STEPS")]
+    eval_every: Option<u64>,
     /// These tasks instead of the experiment's (comma-separated).
     #[arg(long, value_enum, value_delimiter = ',')]
     tasks: Vec<TaskName>,
@@ -162,6 +166,11 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     experiment.scale(args.scale)?;
     if let Some(steps) = args.steps {
         experiment.steps = steps;
+    }
+    if let Some(every) = args.eval_every {
+        experiment
+            .train
+            .insert("eval_every".into(), toml::Value::Integer(i64::try_from(every).unwrap_or(i64::MAX)));
     }
     let planned = experiment.expand()?;
     let (sweep, change) = Sweep::plan(&args.out, &planned)?;

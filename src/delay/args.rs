@@ -20,7 +20,9 @@ pub struct DelayArgs {
     /// σ of Gaussian actuator noise: the executed action is clip(a + N(0, σ²)).
     #[arg(long, value_name = "SIGMA", allow_negative_numbers = true)]
     pub actuator_noise: Option<f64>,
-    /// Actions executed before the first observation arrives.
+    /// Actions executed before the first observation arrives: zeros (a new run's default) or
+    /// random (the paper's Algorithm 1 as written, which caps InvertedPendulum far below its
+    /// published returns).
     #[arg(long, value_enum)]
     pub warmup: Option<WarmupActions>,
 }
