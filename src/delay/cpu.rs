@@ -230,14 +230,7 @@ impl DelayLayer for CpuDelayLayer {
     }
 
     fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), DelayError> {
-        check_len(
-            "actions",
-            actions.len(),
-            self.layout.copies * self.layout.act_dim,
-        )?;
-        self.warmup
-            .fill(actions, self.ready.iter().map(|&r| r != 0));
-        Ok(())
+        self.warmup.fill(actions, &self.ready)
     }
 
     fn augmented(&self) -> &[f32] {

@@ -463,14 +463,7 @@ impl DelayLayer for GpuDelayLayer {
     }
 
     fn fill_warmup(&mut self, actions: &mut [f32]) -> Result<(), DelayError> {
-        check_len(
-            "actions",
-            actions.len(),
-            self.layout.copies * self.layout.act_dim,
-        )?;
-        self.warmup
-            .fill(actions, self.host_ready.iter().map(|&r| r != 0));
-        Ok(())
+        self.warmup.fill(actions, &self.host_ready)
     }
 
     fn augmented(&self) -> &[f32] {

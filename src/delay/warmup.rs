@@ -2,7 +2,8 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::WarmupActions;
+use super::cpu::check_len;
+use super::{DelayError, WarmupActions};
 
 /// Draws warm-up actions for the copies that are not ready.
 pub struct WarmupFiller {
@@ -30,11 +31,12 @@ impl WarmupFiller {
         &mut self.rng
     }
 
-    /// Overwrites the rows of `actions` (`[N, act_dim]`) whose `ready` flag is 0.
-    pub fn fill(&mut self, actions: &mut [f32], ready: impl Iterator<Item = bool>) {
+    /// Overwrites the rows of `actions` (`[N, act_dim]`, one per `ready` flag) whose flag is 0.
+    pub fn fill(&mut self, actions: &mut [f32], ready: &[u32]) -> Result<(), DelayError> {
         let act = self.low.len();
-        for (row, ready) in actions.chunks_mut(act).zip(ready) {
-            if !ready {
+        check_len("actions", actions.len(), ready.len() * act)?;
+        for (row, &ready) in actions.chunks_mut(act).zip(ready) {
+            if ready == 0 {
                 for (j, a) in row.iter_mut().enumerate() {
                     *a = match self.kind {
                         WarmupActions::Random => self.rng.random_range(self.low[j]..=self.high[j]),
@@ -43,5 +45,6 @@ impl WarmupFiller {
                 }
             }
         }
+        Ok(())
     }
 }
