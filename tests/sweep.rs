@@ -439,26 +439,38 @@ fn a_slurm_array_requeues_stopped_tasks_and_ends_like_the_local_runner() {
         "scancel",
         &["--batch", "--signal=USR1", &format!("{job}_1")],
     );
-    // Slurm holds a requeued task back for a while (BeginTime); the test releases it. The array
-    // has ended when every run has finished and Slurm lists none of its tasks: an empty answer
-    // alone is not enough (squeue fails with no output when slurmctld is slow to answer, and a
-    // requeued task can be between two states).
+    // Slurm holds a requeued task back for a while (BeginTime); the test releases it, but not in
+    // the second of its requeue: slurmd refuses a launch whose credential dates from the second
+    // the previous one was revoked in ("Job credential revoked"), and the task then ends with
+    // exit 1 instead of running again (seen in CI). The array has ended when every run has
+    // finished and Slurm lists none of its tasks, or when Slurm has listed none for 2 s (a
+    // failed `squeue` prints nothing, so only successful answers count).
     let start = Instant::now();
+    let mut pending_since = std::collections::HashMap::new();
+    let mut empty_since: Option<Instant> = None;
     loop {
         let answer = slurm.command("squeue", &["-h", "-j", &job, "-o", "%i %T %r"]);
         let queue = String::from_utf8_lossy(&answer.stdout).into_owned();
-        if answer.status.success()
-            && queue.trim().is_empty()
-            && sweep.runs.iter().all(|run| sweep.finished(run))
-        {
-            break;
+        if answer.status.success() && queue.trim().is_empty() {
+            let since = *empty_since.get_or_insert_with(Instant::now);
+            if sweep.runs.iter().all(|run| sweep.finished(run))
+                || since.elapsed() > Duration::from_secs(2)
+            {
+                break;
+            }
+        } else {
+            empty_since = None;
         }
         for line in queue.lines().filter(|l| l.ends_with("PENDING BeginTime")) {
-            let task = line.split(' ').next().unwrap();
-            slurm.command(
-                "scontrol",
-                &["update", &format!("JobId={task}"), "StartTime=now"],
-            );
+            let task = line.split(' ').next().unwrap().to_string();
+            let since = *pending_since.entry(task.clone()).or_insert_with(Instant::now);
+            if since.elapsed() > Duration::from_secs(3) {
+                slurm.command(
+                    "scontrol",
+                    &["update", &format!("JobId={task}"), "StartTime=now"],
+                );
+                pending_since.remove(&task);
+            }
         }
         assert!(
             start.elapsed() < Duration::from_secs(600),

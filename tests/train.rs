@@ -131,6 +131,24 @@ fn delayed_sac_and_vdpo_beat_a_random_policy() {
     }
 }
 
+/// `dhrl eval`'s delay options are laid over the run's own: `--warmup random` or
+/// `--actuator-noise` alone keep the delay the policy was trained for (an augmented policy
+/// evaluated at another Δ would be refused).
+#[test]
+fn eval_options_keep_the_runs_other_delay_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let mut args = vec!["--steps", "600", "--algo", "augmented-sac", "--delay", "2"];
+    args.extend_from_slice(&SMALL);
+    common::train(&args, &run);
+    for options in [&["--warmup", "random"][..], &["--actuator-noise", "0.1"][..]] {
+        let mut eval = vec!["eval", run.to_str().unwrap(), "--episodes", "2"];
+        eval.extend_from_slice(options);
+        let printed = ok(dhrl(&eval));
+        assert!(printed.starts_with("return "), "{options:?}: {printed}");
+    }
+}
+
 #[test]
 fn killed_run_resumes_to_the_uninterrupted_run() {
     // augmented-sac: one learner; d2hpg: two learners and the lifting noise in one checkpoint.

@@ -3,8 +3,8 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use dhrl::delay::{DelayArgs, DelayConfig};
-use dhrl::train::evaluate_saved;
+use dhrl::delay::DelayArgs;
+use dhrl::train::{TrainConfig, evaluate_saved};
 
 #[derive(Args)]
 pub struct EvalArgs {
@@ -12,7 +12,7 @@ pub struct EvalArgs {
     run: PathBuf,
     #[arg(long, default_value_t = 10)]
     episodes: usize,
-    /// Evaluate under other delay options than the run's.
+    /// Evaluate under other delay options than the run's (those not given keep the run's).
     #[command(flatten)]
     delay: DelayArgs,
     /// Evaluate D2HPG's delay-free policy in the undelayed task instead of the regular one.
@@ -24,7 +24,8 @@ pub struct EvalArgs {
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     let delay = if args.delay.any() {
-        Some(args.delay.apply(DelayConfig::default())?)
+        let trained = TrainConfig::from_toml_file(&args.run.join("config.toml"))?.delay;
+        Some(args.delay.apply(trained)?)
     } else {
         None
     };
