@@ -463,7 +463,9 @@ fn a_slurm_array_requeues_stopped_tasks_and_ends_like_the_local_runner() {
         }
         for line in queue.lines().filter(|l| l.ends_with("PENDING BeginTime")) {
             let task = line.split(' ').next().unwrap().to_string();
-            let since = *pending_since.entry(task.clone()).or_insert_with(Instant::now);
+            let since = *pending_since
+                .entry(task.clone())
+                .or_insert_with(Instant::now);
             if since.elapsed() > Duration::from_secs(3) {
                 slurm.command(
                     "scontrol",

@@ -141,7 +141,10 @@ fn eval_options_keep_the_runs_other_delay_settings() {
     let mut args = vec!["--steps", "600", "--algo", "augmented-sac", "--delay", "2"];
     args.extend_from_slice(&SMALL);
     common::train(&args, &run);
-    for options in [&["--warmup", "random"][..], &["--actuator-noise", "0.1"][..]] {
+    for options in [
+        &["--warmup", "random"][..],
+        &["--actuator-noise", "0.1"][..],
+    ] {
         let mut eval = vec!["eval", run.to_str().unwrap(), "--episodes", "2"];
         eval.extend_from_slice(options);
         let printed = ok(dhrl(&eval));

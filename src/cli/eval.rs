@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use dhrl::delay::DelayArgs;
-use dhrl::train::{TrainConfig, evaluate_saved};
+use dhrl::train::evaluate_saved;
 
 #[derive(Args)]
 pub struct EvalArgs {
@@ -23,16 +23,10 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
-    let delay = if args.delay.any() {
-        let trained = TrainConfig::from_toml_file(&args.run.join("config.toml"))?.delay;
-        Some(args.delay.apply(trained)?)
-    } else {
-        None
-    };
     let result = evaluate_saved(
         &args.run,
         args.episodes,
-        delay,
+        &args.delay,
         args.delay_free_policy,
         args.seed,
     )?;

@@ -168,9 +168,10 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
         experiment.steps = steps;
     }
     if let Some(every) = args.eval_every {
-        experiment
-            .train
-            .insert("eval_every".into(), toml::Value::Integer(i64::try_from(every).unwrap_or(i64::MAX)));
+        experiment.train.insert(
+            "eval_every".into(),
+            toml::Value::Integer(i64::try_from(every).unwrap_or(i64::MAX)),
+        );
     }
     let planned = experiment.expand()?;
     let (sweep, change) = Sweep::plan(&args.out, &planned)?;

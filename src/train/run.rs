@@ -14,7 +14,7 @@ use super::eval::{EvalPolicy, EvalResult, evaluate};
 use super::logs::{CsvLog, stat_means, truncate_after};
 use super::{ConfigError, TrainConfig, TrainError, io_error};
 use crate::algos::{ActMode, Agent, AgentSpec, UpdateContext};
-use crate::delay::{DelayConfig, DelayedBatch, ReplayError, ReplayStore};
+use crate::delay::{DelayArgs, DelayConfig, DelayedBatch, ReplayError, ReplayStore};
 use crate::learn::Devices;
 use crate::seeds;
 use crate::sim::{BatchConfig, BatchSnapshot};
@@ -518,28 +518,28 @@ impl Trainer {
     }
 }
 
-/// `dhrl eval`: the saved policy of `run` on `episodes` fresh copies, under `delay` (the
-/// run's own delay when `None`). With `delay_free_policy`, D2HPG's delay-free policy is
-/// evaluated instead, in the undelayed task.
+/// `dhrl eval`: the saved policy of `run` on `episodes` fresh copies, under the run's own
+/// delay with `delay`'s options laid over it. With `delay_free_policy`, D2HPG's delay-free
+/// policy is evaluated instead, in the undelayed task.
 pub fn evaluate_saved(
     run: &Path,
     episodes: usize,
-    delay: Option<DelayConfig>,
+    delay: &DelayArgs,
     delay_free_policy: bool,
     seed: u64,
 ) -> Result<EvalResult, TrainError> {
     let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
     let trained_delay = config.validate()?;
-    let eval_delay = match (delay_free_policy, delay) {
-        (true, Some(_)) => {
+    let eval_delay = match (delay_free_policy, delay.any()) {
+        (true, true) => {
             return Err(TrainError::Config(ConfigError::Invalid {
                 what: "--delay-free-policy",
                 accepted: "used without delay options (the delay-free policy is evaluated undelayed)",
                 value: "given with delay options".into(),
             }));
         }
-        (true, None) => DelayConfig::default(),
-        (false, delay) => delay.unwrap_or(config.delay),
+        (true, false) => DelayConfig::default(),
+        (false, _) => delay.apply(config.delay).map_err(ConfigError::from)?,
     };
     let total = eval_delay.total_delay()?;
     let info = config.algo.info();
