@@ -38,6 +38,7 @@ fn delay_layer_step(c: &mut Criterion) {
                     rewards: &rewards,
                     terminated: &never,
                     truncated,
+                    controls: None,
                 };
                 layer.step(&input).unwrap();
             })

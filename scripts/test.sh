@@ -33,3 +33,10 @@ if [[ "${DHRL_SKIP_GPU_TESTS:-}" != 1 ]]; then
     export DHRL_WGPU_SOFTWARE="${DHRL_WGPU_SOFTWARE:-vulkan}" DHRL_REQUIRE_WGPU_LEARNER=1
 fi
 cargo test --release --features wgpu-learner "$@"
+# The Python package (python/): its extension built from the same compiled tree (the same
+# features, so nothing is built twice), put beside its sources as `maturin develop` would,
+# and its pytest suite run in the venv against Gymnasium and the `dhrl` binary.
+PYO3_PYTHON="$PWD/.deps/venv/bin/python" cargo build --release --features wgpu-learner -p dhrl-python
+cp target/release/lib_dhrl.so python/dhrl/_dhrl.abi3.so
+.deps/venv/bin/python -m pip install --quiet --disable-pip-version-check pytest
+PYTHONPATH="$PWD/python" .deps/venv/bin/python -m pytest -q python/tests

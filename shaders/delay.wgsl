@@ -38,9 +38,13 @@ struct RecordMeta {
 const RECORD_TERMINATED: u32 = 1u;
 const RECORD_TRUNCATED: u32 = 2u;
 const RECORD_FINAL_STATE: u32 = 4u;
-// input_flags bits: 1 terminated, 2 truncated; bits 3.. the row of the reset state (where done).
+// input_flags bits: 1 terminated, 2 truncated, 4 held (no step), 8 restarted (a new episode
+// in place of a step); bits 4.. the row of the new episode's first state (where done or
+// restarted).
 const IN_TERMINATED: u32 = 1u;
 const IN_TRUNCATED: u32 = 2u;
+const IN_HELD: u32 = 4u;
+const IN_RESTART: u32 = 8u;
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read_write> counters: array<CopyCounters>;
@@ -134,6 +138,16 @@ fn step(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let in_row = copy * params.in_stride;
     let flags_in = input_flags[copy];
+    if ((flags_in & IN_HELD) != 0u) {
+        counters[copy].record_count = 0u;
+        return;
+    }
+    if ((flags_in & IN_RESTART) != 0u) {
+        counters[copy].record_count = 0u;
+        counters[copy].episode = counters[copy].episode + 1u;
+        start_episode(copy, params.reset_base + (flags_in >> 4u) * params.obs_dim, true);
+        return;
+    }
     let terminated = (flags_in & IN_TERMINATED) != 0u;
     let truncated = (flags_in & IN_TRUNCATED) != 0u;
     let done = terminated || truncated;
@@ -183,7 +197,7 @@ fn step(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         emit_record(copy, counters[copy].t, flags);
         counters[copy].episode = counters[copy].episode + 1u;
-        start_episode(copy, params.reset_base + (flags_in >> 3u) * params.obs_dim, true);
+        start_episode(copy, params.reset_base + (flags_in >> 4u) * params.obs_dim, true);
     } else {
         update_augmented(copy);
     }

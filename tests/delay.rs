@@ -5,7 +5,7 @@ use dhrl::delay::{
     BatchExtras, CpuDelayLayer, DelayConfig, DelayDevice, DelayError, DelayLayer, DelayedBatch,
     GpuDelayLayer, MAX_DELAY, RecordBatch, ReplayStore, StepInput, Transitions, WarmupActions,
 };
-use dhrl::sim::{BatchConfig, BatchedEnv};
+use dhrl::sim::{BatchConfig, BatchedEnv, CopyStep};
 use dhrl::tasks::TaskName;
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -41,6 +41,7 @@ impl FakeStep {
             rewards: &self.rewards,
             terminated: &self.terminated,
             truncated: &self.truncated,
+            controls: None,
         }
     }
 }
@@ -256,7 +257,7 @@ fn run_cpu(
         let input = produced.input(&actions);
         layer.step(&input).unwrap();
         replay.push(layer.records(), &[]).unwrap();
-        key_transitions(&layer.transitions(), aug, obs_dim, act_dim, &mut emitted);
+        key_transitions(&layer.transitions().unwrap(), aug, obs_dim, act_dim, &mut emitted);
         for c in 0..copies {
             let ep = log[c].last().unwrap();
             let t = fake.t[c] as usize;
@@ -886,4 +887,142 @@ fn a_diverged_copy_ends_its_episode_and_its_last_step_stays_out_of_the_replay() 
         vec![2, 3],
         "without the flag τ = 3 would be sampled"
     );
+}
+
+/// Held copies (a Gymnasium next-step reset) stay exactly as they are and restarted ones (a
+/// partial reset) begin a new episode, in the simulator and in both delay layers alike; the
+/// transitions both layers write out agree too.
+#[test]
+fn held_and_restarted_copies_agree_on_cpu_and_gpu() {
+    let (copies, delay) = (16, 3);
+    let mut env = BatchedEnv::new(&BatchConfig {
+        task: TaskName::Hopper,
+        envs: copies,
+        threads: 2,
+        seed: 5,
+        actuator_noise: 0.0,
+    })
+    .unwrap();
+    let (low, high) = env.action_bounds();
+    let (low, high) = (low.to_vec(), high.to_vec());
+    let config = fixed(delay);
+    let Some(mut gpu) = gpu_layer(&config, copies, env.obs_dim(), &low, &high) else {
+        return;
+    };
+    let mut cpu = CpuDelayLayer::new(&config, copies, env.obs_dim(), &low, &high, 7).unwrap();
+    cpu.reset(env.observations()).unwrap();
+    gpu.reset(env.observations()).unwrap();
+    let (obs, aug) = (env.obs_dim(), cpu.layout().augmented_dim());
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let (mut held, mut restarted) = (0, 0);
+    for step in 0..120 {
+        let actions: Vec<f32> = (0..copies * env.act_dim())
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let controls: Vec<CopyStep> = (0..copies)
+            .map(|_| match rng.random_range(0..10) {
+                0 => CopyStep::Hold,
+                1 => CopyStep::Restart,
+                _ => CopyStep::Step,
+            })
+            .collect();
+        let before_obs = env.observations().to_vec();
+        let before_aug = cpu.augmented().to_vec();
+        let before_counters = cpu.counters().to_vec();
+        env.step_each(&actions, &controls).unwrap();
+        let input = StepInput::from_env(&env, &actions);
+        step_both(&mut cpu, &mut gpu, &input, &format!("step {step}"));
+        assert_eq!(
+            gpu.transitions().unwrap(),
+            cpu.transitions().unwrap(),
+            "step {step}"
+        );
+        for (i, control) in controls.iter().enumerate() {
+            let c = cpu.counters()[i];
+            match control {
+                CopyStep::Step => continue,
+                CopyStep::Hold => {
+                    held += 1;
+                    assert_eq!(
+                        env.observations()[i * obs..(i + 1) * obs],
+                        before_obs[i * obs..(i + 1) * obs]
+                    );
+                    assert_eq!(
+                        cpu.augmented()[i * aug..(i + 1) * aug],
+                        before_aug[i * aug..(i + 1) * aug]
+                    );
+                    assert_eq!((c.t, c.episode), (before_counters[i].t, before_counters[i].episode));
+                }
+                CopyStep::Restart => {
+                    restarted += 1;
+                    assert_eq!((c.t, c.episode), (0, before_counters[i].episode + 1));
+                    assert_eq!(cpu.ready()[i], 0, "Δ = {delay}: nothing observed yet");
+                }
+            }
+            assert_eq!(env.rewards()[i], 0.0);
+            assert_eq!((env.terminated()[i], env.truncated()[i]), (0, 0));
+            assert_eq!(cpu.records().counts[i], 0, "no record completes");
+        }
+    }
+    assert!(held > 50 && restarted > 50, "{held} held, {restarted} restarted");
+}
+
+/// What the Python package hands the agent: the rewards delivered with an episode's
+/// observations add up to its return, and the final augmented state rebuilt from the records
+/// of the end step is `x_T`, the `x_{τ+1}` of its last transition.
+#[test]
+fn delivered_rewards_sum_to_the_return_and_the_final_augmented_state_is_x_t() {
+    let (copies, delay) = (8, 4);
+    let mut env = BatchedEnv::new(&BatchConfig {
+        task: TaskName::Hopper,
+        envs: copies,
+        threads: 2,
+        seed: 2,
+        actuator_noise: 0.0,
+    })
+    .unwrap();
+    let (low, high) = env.action_bounds();
+    let (low, high) = (low.to_vec(), high.to_vec());
+    let mut cpu = CpuDelayLayer::new(&fixed(delay), copies, env.obs_dim(), &low, &high, 7).unwrap();
+    cpu.reset(env.observations()).unwrap();
+    let mut delivered = vec![0.0f64; copies];
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut ended = 0;
+    for _ in 0..300 {
+        let actions: Vec<f32> = (0..copies * env.act_dim())
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        env.step(&actions).unwrap();
+        cpu.step(&StepInput::from_env(&env, &actions)).unwrap();
+        let transitions = cpu.transitions().unwrap();
+        for i in 0..copies {
+            delivered[i] += f64::from(cpu.records().delivered_reward(i));
+            let mut x_t = Vec::new();
+            let done = env.terminated()[i] == 1 || env.truncated()[i] == 1;
+            let rebuilt = cpu.records().push_final_augmented(i, &mut x_t);
+            if !done {
+                assert!(!rebuilt);
+                continue;
+            }
+            ended += 1;
+            let ret = f64::from(env.episode_returns()[i]);
+            assert!(
+                (delivered[i] - ret).abs() <= 1e-4 * ret.abs().max(1.0),
+                "copy {i}: delivered {} vs return {ret}",
+                delivered[i]
+            );
+            delivered[i] = 0.0;
+            let length = env.episode_lengths()[i] as usize;
+            assert_eq!(rebuilt, length >= delay, "T = {length}");
+            let aug = cpu.layout().augmented_dim();
+            if let Some(k) = (0..transitions.len())
+                .rev()
+                .find(|&k| transitions.copy[k] == i)
+                .filter(|&k| transitions.tau[k] as usize == length - 1)
+            {
+                assert_eq!(x_t, transitions.next_augmented[k * aug..(k + 1) * aug]);
+            }
+        }
+    }
+    assert!(ended > copies, "{ended} episodes ended");
 }

@@ -5,7 +5,7 @@
 use super::{
     DelayConfig, DelayDevice, DelayError, DelayLayer, DelayLayout, StepInput, delay_layer,
 };
-use crate::sim::{BatchConfig, BatchedEnv, SimError};
+use crate::sim::{BatchConfig, BatchedEnv, CopyStep, SimError};
 
 #[derive(Debug, thiserror::Error)]
 pub enum BatchError {
@@ -111,6 +111,14 @@ impl DelayedBatch {
     /// Steps the simulator with `actions`, then the delay layer with what it returned.
     pub fn step(&mut self, actions: &[f32]) -> Result<(), BatchError> {
         self.env.step(actions)?;
+        self.layer.step(&StepInput::from_env(&self.env, actions))?;
+        Ok(())
+    }
+
+    /// [`DelayedBatch::step`] with copy `i` doing what `controls[i]` says: held copies stay
+    /// as they are (simulation and delay layer alike), restarted ones begin a new episode.
+    pub fn step_each(&mut self, actions: &[f32], controls: &[CopyStep]) -> Result<(), BatchError> {
+        self.env.step_each(actions, controls)?;
         self.layer.step(&StepInput::from_env(&self.env, actions))?;
         Ok(())
     }

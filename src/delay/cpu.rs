@@ -8,6 +8,7 @@ use super::layout::{
 use super::records::{RecordBatch, StepInput};
 use super::warmup::WarmupFiller;
 use super::{DelayConfig, DelayError};
+use crate::sim::CopyStep;
 use crate::snapshot::SnapshotError;
 use std::io::{Read, Write};
 
@@ -69,6 +70,7 @@ pub(super) struct CopyInput<'a> {
     pub reward: f32,
     pub terminated: bool,
     pub truncated: bool,
+    pub control: CopyStep,
 }
 
 /// The outputs of one copy, as slices of the batch arrays.
@@ -106,34 +108,6 @@ impl CpuDelayLayer {
         &self.counters
     }
 
-    /// The transitions completed by the last step, written out in full (`x` verbatim).
-    pub fn transitions(&self) -> Transitions {
-        let l = self.layout;
-        let (ring_len, stride) = (l.ring_len(), l.stride());
-        let mut out = Transitions::default();
-        for record in self.records.iter() {
-            if record.is_final_state() || (record.meta.tau as usize) < l.delay {
-                continue;
-            }
-            let ring =
-                &self.ring[record.copy * ring_len * stride..(record.copy + 1) * ring_len * stride];
-            let slot = record.meta.slot as usize;
-            let next = (slot + 1) % ring_len;
-            out.copy.push(record.copy);
-            out.episode.push(record.meta.episode);
-            out.tau.push(record.meta.tau);
-            write_augmented(&l, ring, slot, &mut out.augmented);
-            out.state.extend_from_slice(record.state);
-            out.action.extend_from_slice(record.action);
-            out.reward.push(record.reward);
-            write_augmented(&l, ring, next, &mut out.next_augmented);
-            out.next_state
-                .extend_from_slice(&ring[next * stride..next * stride + l.obs_dim]);
-            out.terminated
-                .push(u32::from(record.meta.flags & RECORD_TERMINATED != 0));
-        }
-        out
-    }
 }
 
 impl DelayLayer for CpuDelayLayer {
@@ -170,6 +144,14 @@ impl DelayLayer for CpuDelayLayer {
         let l = self.layout;
         input.check(&l)?;
         let (obs, act) = (l.obs_dim, l.act_dim);
+        let every_copy_steps;
+        let controls = match input.controls {
+            Some(controls) => controls,
+            None => {
+                every_copy_steps = vec![CopyStep::Step; l.copies];
+                &every_copy_steps
+            }
+        };
         (
             self.counters.par_iter_mut(),
             self.ring.par_chunks_mut(l.ring_len() * l.stride()),
@@ -184,6 +166,7 @@ impl DelayLayer for CpuDelayLayer {
             input.rewards.par_iter(),
             input.terminated.par_iter(),
             input.truncated.par_iter(),
+            controls.par_iter(),
         )
             .into_par_iter()
             .with_min_len(64)
@@ -200,6 +183,7 @@ impl DelayLayer for CpuDelayLayer {
                     &reward,
                     &terminated,
                     &truncated,
+                    &control,
                 )| {
                     let input = CopyInput {
                         action,
@@ -208,6 +192,7 @@ impl DelayLayer for CpuDelayLayer {
                         reward,
                         terminated: terminated != 0,
                         truncated: truncated != 0,
+                        control,
                     };
                     step_copy(
                         &l,
@@ -245,6 +230,10 @@ impl DelayLayer for CpuDelayLayer {
         &self.records
     }
 
+    fn transitions(&self) -> Result<Transitions, DelayError> {
+        Ok(transitions_from(&self.layout, &self.ring, &self.records))
+    }
+
     fn save(&self, out: &mut dyn Write) -> Result<(), SnapshotError> {
         write_state(
             out,
@@ -271,6 +260,34 @@ impl DelayLayer for CpuDelayLayer {
             },
         )
     }
+}
+
+/// The transitions of the step records in `records`, written out in full (`x` verbatim) from
+/// the layer's rings (`[N, 2Δ + 3, obs + act + 1]`): what [`DelayLayer::transitions`] returns.
+pub(super) fn transitions_from(l: &DelayLayout, ring: &[f32], records: &RecordBatch) -> Transitions {
+    let (ring_len, stride) = (l.ring_len(), l.stride());
+    let mut out = Transitions::default();
+    for record in records.iter() {
+        if record.is_final_state() || (record.meta.tau as usize) < l.delay {
+            continue;
+        }
+        let ring = &ring[record.copy * ring_len * stride..(record.copy + 1) * ring_len * stride];
+        let slot = record.meta.slot as usize;
+        let next = (slot + 1) % ring_len;
+        out.copy.push(record.copy);
+        out.episode.push(record.meta.episode);
+        out.tau.push(record.meta.tau);
+        write_augmented(l, ring, slot, &mut out.augmented);
+        out.state.extend_from_slice(record.state);
+        out.action.extend_from_slice(record.action);
+        out.reward.push(record.reward);
+        write_augmented(l, ring, next, &mut out.next_augmented);
+        out.next_state
+            .extend_from_slice(&ring[next * stride..next * stride + l.obs_dim]);
+        out.terminated
+            .push(u32::from(record.meta.flags & RECORD_TERMINATED != 0));
+    }
+    out
 }
 
 pub(super) fn check_len(
@@ -319,6 +336,19 @@ fn start_episode(l: &DelayLayout, copy: &mut CopyState<'_>, s0: &[f32], advance:
 /// One step of one copy: store `a_t, r_t` beside `s_t`, store `s_{t+1}`, emit the records that
 /// completed, start the next episode where this one ended, and rebuild `x`.
 pub(super) fn step_copy(l: &DelayLayout, copy: &mut CopyState<'_>, input: &CopyInput<'_>) {
+    match input.control {
+        CopyStep::Step => {}
+        CopyStep::Hold => {
+            copy.counters.record_count = 0;
+            return;
+        }
+        CopyStep::Restart => {
+            copy.counters.record_count = 0;
+            copy.counters.episode += 1;
+            start_episode(l, copy, input.observation, true);
+            return;
+        }
+    }
     let (ring_len, stride, obs) = (l.ring_len() as u32, l.stride(), l.obs_dim);
     let done = input.terminated || input.truncated;
     let c = &mut *copy.counters;

@@ -7,12 +7,13 @@ use std::io::{Read, Write};
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-use super::cpu::check_len;
+use super::cpu::{Transitions, check_len, transitions_from};
 use super::layer::{DelayLayer, LayerState, LayerStateMut, read_state, write_state};
 use super::layout::{CopyCounters, DelayLayout, RecordMeta};
 use super::records::{RecordBatch, StepInput};
 use super::warmup::WarmupFiller;
 use super::{DelayConfig, DelayError};
+use crate::sim::CopyStep;
 use crate::snapshot::SnapshotError;
 
 #[derive(Debug, thiserror::Error)]
@@ -53,6 +54,10 @@ struct Params {
 }
 
 const WORKGROUP: u32 = 64;
+/// `input_flags` bits beside terminated (1) and truncated (2), as `shaders/delay.wgsl` reads
+/// them; bits 4.. hold the row of the copy's new first state, where it starts an episode.
+const IN_HELD: u32 = 4;
+const IN_RESTART: u32 = 8;
 
 /// The GPU implementation of the delay layer. Same outputs as [`super::CpuDelayLayer`].
 pub struct GpuDelayLayer {
@@ -317,6 +322,12 @@ impl GpuDelayLayer {
         step.check(&l)?;
         let (obs, act) = (l.obs_dim, l.act_dim);
         self.input_scratch.clear();
+        // A copy starts an episode from its observations row where it ended one or restarted.
+        let starts = |i: usize| match step.control(i) {
+            CopyStep::Step => step.terminated[i] != 0 || step.truncated[i] != 0,
+            CopyStep::Hold => false,
+            CopyStep::Restart => true,
+        };
         let mut resets = 0u32;
         for i in 0..l.copies {
             let done = step.terminated[i] != 0 || step.truncated[i] != 0;
@@ -330,11 +341,15 @@ impl GpuDelayLayer {
             self.input_scratch.push(step.rewards[i]);
             self.input_scratch
                 .extend_from_slice(&next[i * obs..(i + 1) * obs]);
-            self.flags_scratch[i] =
-                step.terminated[i] | (step.truncated[i] << 1) | if done { resets << 3 } else { 0 };
-            resets += u32::from(done);
+            let control = match step.control(i) {
+                CopyStep::Step => step.terminated[i] | (step.truncated[i] << 1),
+                CopyStep::Hold => IN_HELD,
+                CopyStep::Restart => IN_RESTART,
+            };
+            self.flags_scratch[i] = control | if starts(i) { resets << 4 } else { 0 };
+            resets += u32::from(starts(i));
         }
-        for i in (0..l.copies).filter(|&i| step.terminated[i] != 0 || step.truncated[i] != 0) {
+        for i in (0..l.copies).filter(|&i| starts(i)) {
             self.input_scratch
                 .extend_from_slice(&step.observations[i * obs..(i + 1) * obs]);
         }
@@ -401,6 +416,12 @@ impl GpuDelayLayer {
     }
 
     /// `[N, obs + Δ·act]`: `x_t` of every copy, read back from the device.
+    /// `[N, 2Δ + 3, obs + act + 1]`: every copy's ring.
+    fn read_ring(&self) -> Result<Vec<f32>, GpuError> {
+        let l = self.layout;
+        self.read(&self.ring, l.copies * l.ring_len() * l.stride())
+    }
+
     pub fn read_augmented(&self) -> Result<Vec<f32>, GpuError> {
         self.read(
             &self.augmented,
@@ -478,10 +499,14 @@ impl DelayLayer for GpuDelayLayer {
         &self.host_records
     }
 
+    fn transitions(&self) -> Result<Transitions, DelayError> {
+        let ring = self.read_ring().map_err(gpu_error)?;
+        Ok(transitions_from(&self.layout, &ring, &self.host_records))
+    }
+
     fn save(&self, out: &mut dyn Write) -> Result<(), SnapshotError> {
-        let l = self.layout;
-        let ring: Vec<f32> = self
-            .read(&self.ring, l.copies * l.ring_len() * l.stride())
+        let ring = self
+            .read_ring()
             .map_err(|e| std::io::Error::other(e.to_string()))?;
         write_state(
             out,

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::layout::{CopyCounters, DelayLayout};
 use super::records::{RecordBatch, StepInput};
-use super::{CpuDelayLayer, DelayConfig, DelayError, GpuDelayLayer};
+use super::{CpuDelayLayer, DelayConfig, DelayError, GpuDelayLayer, Transitions};
 use crate::snapshot::{SnapshotError, read_section, write_section};
 
 /// Where the delay layer's ring buffers live.
@@ -38,6 +38,8 @@ pub trait DelayLayer: Send {
     fn ready(&self) -> &[u32];
     /// The step records completed by the last step.
     fn records(&self) -> &RecordBatch;
+    /// The transitions of those records, written out in full (`x_τ` and `x_{τ+1}` verbatim).
+    fn transitions(&self) -> Result<Transitions, DelayError>;
     /// Writes the layer's state (counters, rings, outputs, warm-up random stream).
     fn save(&self, out: &mut dyn Write) -> Result<(), SnapshotError>;
     /// Restores what [`DelayLayer::save`] wrote, from either implementation.

@@ -1,7 +1,7 @@
 //! What goes into the delay layer each step, and the step records that come out.
 use super::DelayError;
 use super::layout::{CopyCounters, DelayLayout, RECORD_FINAL_STATE, RecordMeta};
-use crate::sim::BatchedEnv;
+use crate::sim::{BatchedEnv, CopyStep};
 
 /// One step of the undelayed batch, as [`BatchedEnv`] exposes it: the actions that were
 /// executed (as chosen), and what the step returned, with finished copies already reset.
@@ -16,6 +16,10 @@ pub struct StepInput<'a> {
     pub rewards: &'a [f32],
     pub terminated: &'a [u32],
     pub truncated: &'a [u32],
+    /// `[N]`: what each copy did ([`BatchedEnv::step_each`]); `None`: every copy stepped. A
+    /// held copy stays as it is and completes no record; a restarted one starts a new episode
+    /// from its `observations` row, the steps of the one it leaves never completing.
+    pub controls: Option<&'a [CopyStep]>,
 }
 
 impl<'a> StepInput<'a> {
@@ -27,7 +31,13 @@ impl<'a> StepInput<'a> {
             rewards: env.rewards(),
             terminated: env.terminated(),
             truncated: env.truncated(),
+            controls: Some(env.controls()),
         }
+    }
+
+    /// What copy `i` did.
+    pub fn control(&self, i: usize) -> CopyStep {
+        self.controls.map_or(CopyStep::Step, |c| c[i])
     }
 
     pub(super) fn check(&self, layout: &DelayLayout) -> Result<(), DelayError> {
@@ -43,6 +53,11 @@ impl<'a> StepInput<'a> {
             ("rewards", self.rewards.len(), n),
             ("terminated flags", self.terminated.len(), n),
             ("truncated flags", self.truncated.len(), n),
+            (
+                "per-copy step controls",
+                self.controls.map_or(n, <[CopyStep]>::len),
+                n,
+            ),
         ] {
             if found != expected {
                 return Err(DelayError::WrongLength {
@@ -113,6 +128,47 @@ impl RecordBatch {
 
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// The reward that reached the agent with copy `copy`'s observations in the last step:
+    /// the sum over the step records it completed (one per step once `t > Δ`, none before, and
+    /// at an episode end all that remained), so an episode's delivered rewards add up to its
+    /// return.
+    pub fn delivered_reward(&self, copy: usize) -> f32 {
+        let (slots, stride) = (self.layout.record_slots(), self.layout.stride());
+        (0..self.counts[copy] as usize)
+            .map(|k| copy * slots + k)
+            .filter(|&row| self.meta[row].flags & RECORD_FINAL_STATE == 0)
+            .map(|row| self.data[(row + 1) * stride - 1])
+            .sum()
+    }
+
+    /// `x_T` of copy `copy` when its episode ended in the last step, from the records the end
+    /// delivered: `(s_{T-Δ}, a_{T-Δ}, …, a_{T-1})`, appended to `out`. `false` (nothing
+    /// appended) where no episode ended, or it ended before `x_T` existed (`T < Δ`).
+    pub fn push_final_augmented(&self, copy: usize, out: &mut Vec<f32>) -> bool {
+        let (slots, stride, delay) = (
+            self.layout.record_slots(),
+            self.layout.stride(),
+            self.layout.delay,
+        );
+        let rows = &self.meta[copy * slots..copy * slots + self.counts[copy] as usize];
+        let Some(last) = rows.last().filter(|m| m.flags & RECORD_FINAL_STATE != 0) else {
+            return false;
+        };
+        let Some(first_tau) = (last.tau as usize).checked_sub(delay) else {
+            return false;
+        };
+        // Records are in step order: the one of τ = T − Δ starts the window.
+        let Some(start) = rows.iter().position(|m| m.tau as usize == first_tau) else {
+            return false;
+        };
+        let row = |k: usize| {
+            let at = (copy * slots + start + k) * stride;
+            &self.data[at..at + stride]
+        };
+        self.layout.push_augmented(row, out);
+        true
     }
 
     /// Every record, copy by copy, in step order.

@@ -23,6 +23,20 @@ pub struct BatchConfig {
     pub actuator_noise: f64,
 }
 
+/// What one copy does in a [`BatchedEnv::step_each`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u32)]
+pub enum CopyStep {
+    /// Apply its action and step once (resetting it where the episode ends).
+    #[default]
+    Step = 0,
+    /// Stay as it is: no physics step, reward 0, no flags, its observation unchanged (a
+    /// Gymnasium next-step autoreset, where the copy was already reset when its episode ended).
+    Hold = 1,
+    /// Start a new episode from its own random stream (a partial reset): reward 0, no flags.
+    Restart = 2,
+}
+
 /// One copy with its own random stream and scratch space.
 struct EnvCopy {
     env: Env,
@@ -63,6 +77,8 @@ pub struct BatchedEnv {
     diverged: Vec<u32>,
     episode_returns: Vec<f32>,
     episode_lengths: Vec<u32>,
+    /// `[N]`: what each copy did in the last step.
+    controls: Vec<CopyStep>,
 }
 
 /// Everything [`BatchedEnv::restore`] needs to continue a batch exactly.
@@ -201,6 +217,7 @@ impl BatchedEnv {
             diverged: vec![0; n],
             episode_returns: vec![0.0; n],
             episode_lengths: vec![0; n],
+            controls: vec![CopyStep::Step; n],
         };
         batch.reset_all();
         Ok(batch)
@@ -215,12 +232,7 @@ impl BatchedEnv {
                 self.observations.par_chunks_mut(obs_dim),
             )
                 .into_par_iter()
-                .for_each(|(copy, obs)| {
-                    copy.env.reset(&mut copy.rng);
-                    copy.episode_return = 0.0;
-                    copy.env.observe(&mut copy.obs);
-                    write_f32(obs, &copy.obs);
-                });
+                .for_each(|(copy, obs)| copy.begin_episode(obs));
         });
         self.rewards.fill(0.0);
         self.terminated.fill(0);
@@ -230,6 +242,30 @@ impl BatchedEnv {
 
     /// Applies `actions` (`[N, act_dim]`, row `i` to copy `i`) and steps every copy once.
     pub fn step(&mut self, actions: &[f32]) -> Result<(), SimError> {
+        self.controls.fill(CopyStep::Step);
+        self.run_step(actions)
+    }
+
+    /// Like [`BatchedEnv::step`], copy `i` doing what `controls[i]` says (its action row is
+    /// ignored unless it steps).
+    pub fn step_each(&mut self, actions: &[f32], controls: &[CopyStep]) -> Result<(), SimError> {
+        if controls.len() != self.copies.len() {
+            return Err(SimError::WrongLength {
+                what: "the per-copy step controls",
+                found: controls.len(),
+                expected: self.copies.len(),
+            });
+        }
+        self.controls.copy_from_slice(controls);
+        self.run_step(actions)
+    }
+
+    /// `[N]`: what each copy did in the last step (all [`CopyStep::Step`] after a plain step).
+    pub fn controls(&self) -> &[CopyStep] {
+        &self.controls
+    }
+
+    fn run_step(&mut self, actions: &[f32]) -> Result<(), SimError> {
         let (obs_dim, act_dim) = (self.obs_dim(), self.act_dim());
         let expected = self.copies.len() * act_dim;
         if actions.len() != expected {
@@ -247,6 +283,7 @@ impl BatchedEnv {
         self.pool.install(|| {
             (
                 self.copies.par_iter_mut(),
+                self.controls.par_iter(),
                 actions.par_chunks(act_dim),
                 self.observations.par_chunks_mut(obs_dim),
                 self.final_observations.par_chunks_mut(obs_dim),
@@ -262,6 +299,7 @@ impl BatchedEnv {
                 .for_each(
                     |(
                         copy,
+                        &control,
                         action,
                         obs,
                         final_obs,
@@ -282,7 +320,11 @@ impl BatchedEnv {
                             episode_return: ret,
                             episode_length: len,
                         };
-                        copy.step(model, action, noise, out);
+                        match control {
+                            CopyStep::Step => copy.step(model, action, noise, out),
+                            CopyStep::Hold => out.clear_step(),
+                            CopyStep::Restart => copy.restart(out),
+                        }
                     },
                 );
         });
@@ -380,7 +422,31 @@ impl BatchedEnv {
     }
 }
 
+impl CopyOutputs<'_> {
+    /// No reward and no flags: the step outputs of a copy that did not step.
+    fn clear_step(self) {
+        *self.reward = 0.0;
+        *self.terminated = 0;
+        *self.truncated = 0;
+        *self.diverged = 0;
+    }
+}
+
 impl EnvCopy {
+    /// A new episode from the copy's own stream, its first observation written to `obs`.
+    fn begin_episode(&mut self, obs: &mut [f32]) {
+        self.env.reset(&mut self.rng);
+        self.episode_return = 0.0;
+        self.env.observe(&mut self.obs);
+        write_f32(obs, &self.obs);
+    }
+
+    /// [`EnvCopy::begin_episode`] in place of a step.
+    fn restart(&mut self, out: CopyOutputs<'_>) {
+        self.begin_episode(out.obs);
+        out.clear_step();
+    }
+
     fn step(
         &mut self,
         model: &TaskModel,

@@ -5,7 +5,7 @@ mod batch;
 mod env;
 mod model;
 
-pub use batch::{BatchConfig, BatchSnapshot, BatchedEnv};
+pub use batch::{BatchConfig, BatchSnapshot, BatchedEnv, CopyStep};
 pub use env::{Env, EnvSnapshot, StepOutcome};
 pub use model::{TaskModel, assets_dir};
 

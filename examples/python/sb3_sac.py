@@ -1,0 +1,50 @@
+"""Stable-Baselines3's SAC, unchanged, on a delayed dhrl task: the policy sees the augmented
+states x_t, so this is augmented SAC (one of the paper's baselines).
+
+    python examples/python/sb3_sac.py --steps 30000 --out docs/python/sb3_sac
+
+Needs ``pip install './python[sb3]'``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import time
+
+import numpy as np
+from stable_baselines3 import SAC
+
+import dhrl.sb3
+from curves import evaluate, write_curve
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--task", default="InvertedPendulum-v4")
+    parser.add_argument("--delay", type=int, default=5)
+    parser.add_argument("--steps", type=int, default=30_000)
+    parser.add_argument("--eval-every", type=int, default=2_500)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/python/sb3_sac"))
+    args = parser.parse_args()
+
+    env = dhrl.sb3.make_vec(args.task, 1, delay=args.delay, seed=args.seed)
+    model = SAC("MlpPolicy", env, learning_starts=5_000, seed=args.seed, device="cpu", verbose=0)
+
+    def greedy(x: np.ndarray) -> np.ndarray:
+        return model.predict(x, deterministic=True)[0]
+
+    curve, started = [], time.time()
+    for steps in range(0, args.steps + 1, args.eval_every):
+        if steps:
+            model.learn(args.eval_every, reset_num_timesteps=False)
+        returns = evaluate(greedy, args.task, args.delay, episodes=10, seed=10_000 + steps)
+        curve.append((steps, float(np.mean(returns)), float(np.std(returns))))
+        print(f"{steps:>7} steps  eval return {curve[-1][1]:8.1f} ± {curve[-1][2]:6.1f}  ({time.time() - started:.0f} s)", flush=True)
+    write_curve(args.out, f"SB3 SAC on dhrl.sb3.make_vec: {args.task}, Δ = {args.delay}", curve)
+    print(f"curve: {args.out.with_suffix('.csv')}, {args.out.with_suffix('.svg')}")
+
+
+if __name__ == "__main__":
+    main()

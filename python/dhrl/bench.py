@@ -1,0 +1,157 @@
+"""``python -m dhrl.bench``: environment steps per second of ``dhrl.make_vec`` beside what a
+Python user runs today, measured in the same run on this machine: Gymnasium's
+``SyncVectorEnv`` and ``AsyncVectorEnv`` of ``<Task>-v4`` wrapped in ``DelayObservation``, and
+EnvPool at Δ = 0 when it is installed. Random actions, resets included; every vector step
+counts ``num_envs`` environment steps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from typing import Callable
+
+import numpy as np
+
+
+def measure(step: Callable[[np.ndarray], object], actions: np.ndarray, seconds: float) -> float:
+    """Environment steps per second of ``step`` over at least ``seconds`` (after 5 warm-up steps)."""
+    num_envs = actions.shape[1]
+    for k in range(5):
+        step(actions[k % len(actions)])
+    steps, start = 0, time.perf_counter()
+    while True:
+        step(actions[steps % len(actions)])
+        steps += 1
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds and steps >= 3:
+            return steps * num_envs / elapsed
+
+
+def bench_dhrl(gym_id: str, num_envs: int, delay: int, threads: int, actions, seconds) -> float:
+    import dhrl
+
+    env = dhrl.make_vec(gym_id, num_envs, delay=delay, num_threads=threads)
+    env.reset(seed=0)
+    try:
+        return measure(env.step, actions, seconds)
+    finally:
+        env.close()
+
+
+def bench_gymnasium(gym_id: str, num_envs: int, delay: int, kind: str, actions, seconds) -> float:
+    import gymnasium as gym
+    from gymnasium.wrappers import DelayObservation
+
+    def make():
+        env = gym.make(gym_id)
+        return DelayObservation(env, delay) if delay > 0 else env
+
+    vector = gym.vector.SyncVectorEnv if kind == "sync" else gym.vector.AsyncVectorEnv
+    env = vector([make] * num_envs)
+    env.reset(seed=0)
+    try:
+        return measure(env.step, actions.astype(np.float64), seconds)
+    finally:
+        env.close()
+
+
+def bench_envpool(gym_id: str, num_envs: int, threads: int, actions, seconds) -> float | None:
+    try:
+        import envpool
+    except ImportError:
+        return None
+    env = envpool.make_gymnasium(gym_id, num_envs=num_envs, num_threads=threads, seed=0)
+    env.reset()
+    try:
+        return measure(env.step, actions.astype(np.float64), seconds)
+    finally:
+        env.close()
+
+
+def ratio(a: float | None, b: float | None) -> str:
+    return f"{a / b:.2f}×" if a and b else "–"
+
+
+def rate(value: float | None) -> str:
+    return f"{value:,.0f}" if value else "–"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m dhrl.bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", default="HalfCheetah-v4,Humanoid-v4")
+    parser.add_argument("--envs", default="1,16,256", help="comma-separated copy counts")
+    parser.add_argument("--delay", type=int, default=20, help="the delayed configuration's Δ")
+    parser.add_argument("--threads", type=int, default=os.cpu_count() or 1, help="dhrl's and EnvPool's threads")
+    parser.add_argument("--seconds", type=float, default=3.0, help="time per measurement")
+    parser.add_argument(
+        "--async-max", type=int, default=256,
+        help="largest copy count AsyncVectorEnv is run at (one process per copy)",
+    )
+    parser.add_argument("--json", action="store_true", help="print one JSON object per row instead of the table")
+    args = parser.parse_args(argv)
+    try:
+        sizes = [int(n) for n in args.envs.split(",")]
+        if any(n < 1 for n in sizes):
+            raise ValueError
+    except ValueError:
+        parser.error(f"--envs {args.envs!r}: expected comma-separated integers ≥ 1, e.g. 1,16,256")
+    if args.delay < 0 or args.threads < 1 or args.seconds <= 0:
+        parser.error("--delay must be ≥ 0, --threads ≥ 1 and --seconds > 0")
+    tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
+    import dhrl
+
+    for task in tasks:
+        try:
+            dhrl.task_name(task)
+        except ValueError as e:
+            parser.error(str(e))
+
+    delay = args.delay
+    header = (
+        f"| task | copies | dhrl Δ=0 | dhrl Δ={delay} | Gymnasium Sync Δ={delay} | Gymnasium Async Δ={delay} "
+        f"| EnvPool Δ=0 | dhrl Δ={delay} / best Gymnasium | dhrl / EnvPool (Δ=0) | Δ={delay} / Δ=0 |"
+    )
+    if not args.json:
+        print(f"env steps/s, {args.threads} dhrl/EnvPool threads, {args.seconds:g} s per cell, {os.cpu_count()} cores")
+        print(header)
+        print("|" + "---|" * 10)
+    for task in tasks:
+        gym_id = dhrl.TASKS.get(task, task)
+        for n in sizes:
+            act_dim = dhrl.make_vec(gym_id, 1).act_dim
+            actions = np.random.default_rng(0).uniform(-1, 1, (64, n, act_dim)).astype(np.float32)
+            row = {
+                "task": gym_id,
+                "copies": n,
+                "dhrl_delay0": bench_dhrl(gym_id, n, 0, args.threads, actions, args.seconds),
+                "dhrl_delayed": bench_dhrl(gym_id, n, delay, args.threads, actions, args.seconds),
+                "gym_sync": bench_gymnasium(gym_id, n, delay, "sync", actions, args.seconds),
+                "gym_async": (
+                    bench_gymnasium(gym_id, n, delay, "async", actions, args.seconds)
+                    if n <= args.async_max
+                    else None
+                ),
+                "envpool_delay0": bench_envpool(gym_id, n, args.threads, actions, args.seconds),
+                "delay": delay,
+                "threads": args.threads,
+            }
+            best_gym = max(v for v in (row["gym_sync"], row["gym_async"]) if v)
+            if args.json:
+                print(json.dumps(row), flush=True)
+            else:
+                print(
+                    f"| {gym_id} | {n} | {rate(row['dhrl_delay0'])} | {rate(row['dhrl_delayed'])} "
+                    f"| {rate(row['gym_sync'])} | {rate(row['gym_async'])} | {rate(row['envpool_delay0'])} "
+                    f"| {ratio(row['dhrl_delayed'], best_gym)} | {ratio(row['dhrl_delay0'], row['envpool_delay0'])} "
+                    f"| {ratio(row['dhrl_delayed'], row['dhrl_delay0'])} |",
+                    flush=True,
+                )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
