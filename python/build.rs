@@ -14,6 +14,8 @@ fn main() {
             lib_dir.display()
         );
     }
-    let lib_dir = lib_dir.canonicalize().expect("the set-up's library folder exists");
+    let lib_dir = lib_dir
+        .canonicalize()
+        .expect("the set-up's library folder exists");
     println!("cargo::rustc-link-arg=-Wl,-rpath,{}", lib_dir.display());
 }

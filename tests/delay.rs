@@ -257,7 +257,13 @@ fn run_cpu(
         let input = produced.input(&actions);
         layer.step(&input).unwrap();
         replay.push(layer.records(), &[]).unwrap();
-        key_transitions(&layer.transitions().unwrap(), aug, obs_dim, act_dim, &mut emitted);
+        key_transitions(
+            &layer.transitions().unwrap(),
+            aug,
+            obs_dim,
+            act_dim,
+            &mut emitted,
+        );
         for c in 0..copies {
             let ep = log[c].last().unwrap();
             let t = fake.t[c] as usize;
@@ -707,6 +713,35 @@ fn gpu_layer(
     }
 }
 
+/// `copies` Hopper copies (which fall at different times) on two threads.
+fn hopper_batch(copies: usize, seed: u64) -> BatchedEnv {
+    BatchedEnv::new(&BatchConfig {
+        task: TaskName::Hopper,
+        envs: copies,
+        threads: 2,
+        seed,
+        actuator_noise: 0.0,
+    })
+    .unwrap()
+}
+
+/// A CPU delay layer of fixed delay `delay` for `env`'s copies, started from their states.
+fn cpu_layer_for(env: &BatchedEnv, delay: usize) -> CpuDelayLayer {
+    let (low, high) = env.action_bounds();
+    let mut cpu =
+        CpuDelayLayer::new(&fixed(delay), env.len(), env.obs_dim(), low, high, 7).unwrap();
+    cpu.reset(env.observations()).unwrap();
+    cpu
+}
+
+/// [`cpu_layer_for`] and its GPU twin (`None` when GPU tests are knowingly skipped).
+fn both_layers(env: &BatchedEnv, delay: usize) -> Option<(CpuDelayLayer, GpuDelayLayer)> {
+    let (low, high) = env.action_bounds();
+    let mut gpu = gpu_layer(&fixed(delay), env.len(), env.obs_dim(), low, high)?;
+    gpu.reset(env.observations()).unwrap();
+    Some((cpu_layer_for(env, delay), gpu))
+}
+
 /// (b) The WGSL kernels produce the same augmented states and records as the CPU reference,
 /// across episode boundaries, with copies finishing at different times.
 #[test]
@@ -754,23 +789,10 @@ fn gpu_matches_cpu_on_synthetic_episodes() {
 #[test]
 fn gpu_matches_cpu_on_hopper() {
     let (copies, delay) = (24, 6);
-    let mut env = BatchedEnv::new(&BatchConfig {
-        task: TaskName::Hopper,
-        envs: copies,
-        threads: 2,
-        seed: 3,
-        actuator_noise: 0.0,
-    })
-    .unwrap();
-    let (low, high) = env.action_bounds();
-    let (low, high) = (low.to_vec(), high.to_vec());
-    let config = fixed(delay);
-    let Some(mut gpu) = gpu_layer(&config, copies, env.obs_dim(), &low, &high) else {
+    let mut env = hopper_batch(copies, 3);
+    let Some((mut cpu, mut gpu)) = both_layers(&env, delay) else {
         return;
     };
-    let mut cpu = CpuDelayLayer::new(&config, copies, env.obs_dim(), &low, &high, 7).unwrap();
-    cpu.reset(env.observations()).unwrap();
-    gpu.reset(env.observations()).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     let mut finished = 0;
     for step in 0..150 {
@@ -895,23 +917,10 @@ fn a_diverged_copy_ends_its_episode_and_its_last_step_stays_out_of_the_replay() 
 #[test]
 fn held_and_restarted_copies_agree_on_cpu_and_gpu() {
     let (copies, delay) = (16, 3);
-    let mut env = BatchedEnv::new(&BatchConfig {
-        task: TaskName::Hopper,
-        envs: copies,
-        threads: 2,
-        seed: 5,
-        actuator_noise: 0.0,
-    })
-    .unwrap();
-    let (low, high) = env.action_bounds();
-    let (low, high) = (low.to_vec(), high.to_vec());
-    let config = fixed(delay);
-    let Some(mut gpu) = gpu_layer(&config, copies, env.obs_dim(), &low, &high) else {
+    let mut env = hopper_batch(copies, 5);
+    let Some((mut cpu, mut gpu)) = both_layers(&env, delay) else {
         return;
     };
-    let mut cpu = CpuDelayLayer::new(&config, copies, env.obs_dim(), &low, &high, 7).unwrap();
-    cpu.reset(env.observations()).unwrap();
-    gpu.reset(env.observations()).unwrap();
     let (obs, aug) = (env.obs_dim(), cpu.layout().augmented_dim());
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     let (mut held, mut restarted) = (0, 0);
@@ -951,7 +960,10 @@ fn held_and_restarted_copies_agree_on_cpu_and_gpu() {
                         cpu.augmented()[i * aug..(i + 1) * aug],
                         before_aug[i * aug..(i + 1) * aug]
                     );
-                    assert_eq!((c.t, c.episode), (before_counters[i].t, before_counters[i].episode));
+                    assert_eq!(
+                        (c.t, c.episode),
+                        (before_counters[i].t, before_counters[i].episode)
+                    );
                 }
                 CopyStep::Restart => {
                     restarted += 1;
@@ -964,7 +976,10 @@ fn held_and_restarted_copies_agree_on_cpu_and_gpu() {
             assert_eq!(cpu.records().counts[i], 0, "no record completes");
         }
     }
-    assert!(held > 50 && restarted > 50, "{held} held, {restarted} restarted");
+    assert!(
+        held > 50 && restarted > 50,
+        "{held} held, {restarted} restarted"
+    );
 }
 
 /// What the Python package hands the agent: the rewards delivered with an episode's
@@ -973,18 +988,8 @@ fn held_and_restarted_copies_agree_on_cpu_and_gpu() {
 #[test]
 fn delivered_rewards_sum_to_the_return_and_the_final_augmented_state_is_x_t() {
     let (copies, delay) = (8, 4);
-    let mut env = BatchedEnv::new(&BatchConfig {
-        task: TaskName::Hopper,
-        envs: copies,
-        threads: 2,
-        seed: 2,
-        actuator_noise: 0.0,
-    })
-    .unwrap();
-    let (low, high) = env.action_bounds();
-    let (low, high) = (low.to_vec(), high.to_vec());
-    let mut cpu = CpuDelayLayer::new(&fixed(delay), copies, env.obs_dim(), &low, &high, 7).unwrap();
-    cpu.reset(env.observations()).unwrap();
+    let mut env = hopper_batch(copies, 2);
+    let mut cpu = cpu_layer_for(&env, delay);
     let mut delivered = vec![0.0f64; copies];
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut ended = 0;

@@ -95,7 +95,17 @@ def _autoreset_mode(value: Any) -> AutoresetMode:
 
 
 class DelayedVectorEnv(VectorEnv):
-    """``num_envs`` copies of a Gymnasium v4 MuJoCo task under one delay (see the module)."""
+    """``num_envs`` copies of a Gymnasium v4 MuJoCo task under one delay (see the module for
+    what the agent receives), stepped in parallel on ``num_threads`` threads (default: one per
+    core, at most one per copy).
+
+    ``delay``: steps before an observation (with its reward) reaches the agent;
+    ``action_delay``: steps before an action is executed; ``max_delay``: random observation
+    delays in ``1..max_delay`` instead of a fixed one (the agent holds each observation until it
+    is ``max_delay`` old); ``actuator_noise``: σ of Gaussian noise on the executed action,
+    clipped to the bounds; ``warmup``: what runs before the first observation arrives
+    (``"zeros"`` or ``"random"``). Copy ``i`` draws from stream ``i`` of ``seed``.
+    """
 
     def __init__(
         self,
@@ -362,30 +372,9 @@ class DelayedVectorEnv(VectorEnv):
         return array.copy()
 
 
-def make_vec(
-    task: str,
-    num_envs: int,
-    delay: int = 0,
-    action_delay: int = 0,
-    max_delay: int | None = None,
-    actuator_noise: float = 0.0,
-    warmup: str = "zeros",
-    seed: int = 0,
-    num_threads: int | None = None,
-    autoreset_mode: str | AutoresetMode = "next_step",
-) -> DelayedVectorEnv:
+def make_vec(task: str, num_envs: int, **options: Any) -> DelayedVectorEnv:
     """``num_envs`` copies of ``task`` (``"half-cheetah"`` or ``"HalfCheetah-v4"``) as the
-    delayed agent lives in them, stepped in parallel on ``num_threads`` threads (default: one
-    per core, at most one per copy).
-
-    ``delay``: steps before an observation (with its reward) reaches the agent;
-    ``action_delay``: steps before an action is executed; ``max_delay``: random observation
-    delays in ``1..max_delay`` instead of a fixed one (the agent holds each observation until it
-    is ``max_delay`` old); ``actuator_noise``: σ of Gaussian noise on the executed action,
-    clipped to the bounds; ``warmup``: what runs before the first observation arrives
-    (``"zeros"`` or ``"random"``). Copy ``i`` draws from stream ``i`` of ``seed``."""
-    return DelayedVectorEnv(
-        task, num_envs, delay=delay, action_delay=action_delay, max_delay=max_delay,
-        actuator_noise=actuator_noise, warmup=warmup, seed=seed, num_threads=num_threads,
-        autoreset_mode=autoreset_mode,
-    )
+    delayed agent lives in them: a :class:`DelayedVectorEnv`, whose options it takes
+    (``delay=0, action_delay=0, max_delay=None, actuator_noise=0.0, warmup="zeros", seed=0,
+    num_threads=None, autoreset_mode="next_step"``)."""
+    return DelayedVectorEnv(task, num_envs, **options)

@@ -9,9 +9,7 @@ use dhrl::delay::{DelayConfig, DelayDevice, DelayedBatch, WarmupActions};
 use dhrl::seeds;
 use dhrl::sim::{BatchConfig, CopyStep};
 use dhrl::tasks::TaskName;
-use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
-};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -61,7 +59,11 @@ struct Batch {
     delay: usize,
 }
 
-fn f32_rows<'py>(py: Python<'py>, values: Vec<f32>, width: usize) -> PyResult<Bound<'py, PyArray2<f32>>> {
+fn f32_rows<'py>(
+    py: Python<'py>,
+    values: Vec<f32>,
+    width: usize,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let rows = if width == 0 { 0 } else { values.len() / width };
     values
         .into_pyarray(py)
@@ -70,7 +72,11 @@ fn f32_rows<'py>(py: Python<'py>, values: Vec<f32>, width: usize) -> PyResult<Bo
 }
 
 fn flags<'py>(py: Python<'py>, values: &[u32]) -> Bound<'py, PyArray1<bool>> {
-    values.iter().map(|&v| v != 0).collect::<Vec<bool>>().into_pyarray(py)
+    values
+        .iter()
+        .map(|&v| v != 0)
+        .collect::<Vec<bool>>()
+        .into_pyarray(py)
 }
 
 #[pymethods]
@@ -168,7 +174,10 @@ impl Batch {
     ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
         let core = self.lock()?;
         let (low, high) = core.batch.env().action_bounds();
-        Ok((low.to_vec().into_pyarray(py), high.to_vec().into_pyarray(py)))
+        Ok((
+            low.to_vec().into_pyarray(py),
+            high.to_vec().into_pyarray(py),
+        ))
     }
 
     /// Rebuilds every copy from `seed` (initial states, actuator noise, warm-up actions and
@@ -260,7 +269,10 @@ impl Batch {
                 controls,
                 ..
             } = &mut *core;
-            batch.layer_mut().fill_warmup(actions).map_err(value_error)?;
+            batch
+                .layer_mut()
+                .fill_warmup(actions)
+                .map_err(value_error)?;
             batch.step_each(actions, controls).map_err(value_error)
         })?;
         stepped(py, core)
@@ -269,9 +281,9 @@ impl Batch {
 
 impl Batch {
     fn lock(&self) -> PyResult<std::sync::MutexGuard<'_, Core>> {
-        self.core
-            .lock()
-            .map_err(|_| PyRuntimeError::new_err("an earlier step panicked; build a new environment"))
+        self.core.lock().map_err(|_| {
+            PyRuntimeError::new_err("an earlier step panicked; build a new environment")
+        })
     }
 }
 
@@ -282,7 +294,10 @@ fn current<'py>(py: Python<'py>, core: &Core) -> PyResult<Bound<'py, PyDict>> {
     let aug = core.batch.layout().augmented_dim();
     out.set_item("augmented", f32_rows(py, layer.augmented().to_vec(), aug)?)?;
     out.set_item("ready", flags(py, layer.ready()))?;
-    out.set_item("state", f32_rows(py, env.observations().to_vec(), env.obs_dim())?)?;
+    out.set_item(
+        "state",
+        f32_rows(py, env.observations().to_vec(), env.obs_dim())?,
+    )?;
     Ok(out)
 }
 
@@ -290,7 +305,12 @@ fn current<'py>(py: Python<'py>, core: &Core) -> PyResult<Bound<'py, PyDict>> {
 fn stepped<'py>(py: Python<'py>, core: &Core) -> PyResult<Bound<'py, PyDict>> {
     let out = current(py, core)?;
     let (layer, env, layout) = (core.batch.layer(), core.batch.env(), core.batch.layout());
-    let (n, obs, act, aug) = (env.len(), layout.obs_dim, layout.act_dim, layout.augmented_dim());
+    let (n, obs, act, aug) = (
+        env.len(),
+        layout.obs_dim,
+        layout.act_dim,
+        layout.augmented_dim(),
+    );
     let records = layer.records();
     let rewards: Vec<f32> = (0..n).map(|i| records.delivered_reward(i)).collect();
     let mut final_augmented = Vec::with_capacity(n * aug);
@@ -308,8 +328,14 @@ fn stepped<'py>(py: Python<'py>, core: &Core) -> PyResult<Bound<'py, PyDict>> {
         "final_state",
         f32_rows(py, env.final_observations().to_vec(), obs)?,
     )?;
-    out.set_item("episode_return", env.episode_returns().to_vec().into_pyarray(py))?;
-    out.set_item("episode_length", env.episode_lengths().to_vec().into_pyarray(py))?;
+    out.set_item(
+        "episode_return",
+        env.episode_returns().to_vec().into_pyarray(py),
+    )?;
+    out.set_item(
+        "episode_length",
+        env.episode_lengths().to_vec().into_pyarray(py),
+    )?;
     out.set_item("action", f32_rows(py, core.actions.clone(), act)?)?;
     let t = layer.transitions().map_err(value_error)?;
     let transitions = PyDict::new(py);

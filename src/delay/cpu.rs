@@ -107,7 +107,6 @@ impl CpuDelayLayer {
     pub fn counters(&self) -> &[CopyCounters] {
         &self.counters
     }
-
 }
 
 impl DelayLayer for CpuDelayLayer {
@@ -264,7 +263,11 @@ impl DelayLayer for CpuDelayLayer {
 
 /// The transitions of the step records in `records`, written out in full (`x` verbatim) from
 /// the layer's rings (`[N, 2Δ + 3, obs + act + 1]`): what [`DelayLayer::transitions`] returns.
-pub(super) fn transitions_from(l: &DelayLayout, ring: &[f32], records: &RecordBatch) -> Transitions {
+pub(super) fn transitions_from(
+    l: &DelayLayout,
+    ring: &[f32],
+    records: &RecordBatch,
+) -> Transitions {
     let (ring_len, stride) = (l.ring_len(), l.stride());
     let mut out = Transitions::default();
     for record in records.iter() {
