@@ -144,6 +144,7 @@ def main() -> None:
             returns = evaluate(greedy, args.task, args.delay, episodes=10, seed=10_000 + steps)
             curve.append((steps, float(np.mean(returns)), float(np.std(returns))))
             print(f"{steps:>7} steps  eval return {curve[-1][1]:8.1f} ± {curve[-1][2]:6.1f}  ({time.time() - started:.0f} s)", flush=True)
+            write_curve(args.out, f"BPQL from dhrl.make_vec: {args.task}, Δ = {args.delay}", curve)  # after every evaluation: an interrupted run keeps its curve
             next_eval += args.eval_every
         if steps < args.start:
             actions = rng.uniform(-scale, scale, (args.envs, act_dim)).astype(np.float32)
@@ -156,7 +157,6 @@ def main() -> None:
         if steps >= args.start:
             for _ in range(args.envs):
                 update()
-    write_curve(args.out, f"BPQL from dhrl.make_vec: {args.task}, Δ = {args.delay}", curve)
     print(f"curve: {args.out.with_suffix('.csv')}, {args.out.with_suffix('.svg')}")
 
 

@@ -30,14 +30,16 @@ def evaluate(policy: Callable[[np.ndarray], np.ndarray], task: str, delay: int, 
 def write_curve(out: pathlib.Path, title: str, rows: list[tuple[int, float, float]]) -> None:
     """``rows`` of (env steps, mean return, std) to ``out``.csv and ``out``.svg."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    with open(out.with_suffix(".csv"), "w", newline="") as f:
+    partial = out.with_suffix(".csv.partial")
+    with open(partial, "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["env_steps", "mean_return", "std_return"])
         writer.writerows(rows)
+    partial.replace(out.with_suffix(".csv"))  # atomic: a reader never sees half a file
     width, height, pad = 640, 400, 56
     steps = [r[0] for r in rows]
     top = max(1000.0, max(r[1] + r[2] for r in rows))
-    x = lambda s: pad + (width - 2 * pad) * s / max(steps)  # noqa: E731
+    x = lambda s: pad + (width - 2 * pad) * s / max(max(steps), 1)  # noqa: E731
     y = lambda v: height - pad - (height - 2 * pad) * max(v, 0.0) / top  # noqa: E731
     band = [(x(s), y(m + d)) for s, m, d in rows] + [(x(s), y(m - d)) for s, m, d in reversed(rows)]
     line = " ".join(f"{x(s):.1f},{y(m):.1f}" for s, m, _ in rows)
@@ -51,8 +53,10 @@ def write_curve(out: pathlib.Path, title: str, rows: list[tuple[int, float, floa
 <polygon points="{' '.join(f'{a:.1f},{b:.1f}' for a, b in band)}" fill="#1f77b4" fill-opacity="0.2"/>
 <polyline points="{line}" fill="none" stroke="#1f77b4" stroke-width="2"/>
 <text x="{width / 2}" y="24" text-anchor="middle" font-size="14">{title}</text>
-<text x="{width / 2}" y="{height - 16}" text-anchor="middle">environment steps (max {max(steps):,})</text>
+<text x="{width / 2}" y="{height - 16}" text-anchor="middle">environment steps (0 to {max(steps):,})</text>
 <text x="16" y="{height / 2}" transform="rotate(-90 16 {height / 2})" text-anchor="middle">evaluation return (mean ± std)</text>
 </svg>
 """
-    out.with_suffix(".svg").write_text(svg)
+    partial = out.with_suffix(".svg.partial")
+    partial.write_text(svg)
+    partial.replace(out.with_suffix(".svg"))

@@ -42,7 +42,7 @@ def main() -> None:
         returns = evaluate(greedy, args.task, args.delay, episodes=10, seed=10_000 + steps)
         curve.append((steps, float(np.mean(returns)), float(np.std(returns))))
         print(f"{steps:>7} steps  eval return {curve[-1][1]:8.1f} ± {curve[-1][2]:6.1f}  ({time.time() - started:.0f} s)", flush=True)
-    write_curve(args.out, f"SB3 SAC on dhrl.sb3.make_vec: {args.task}, Δ = {args.delay}", curve)
+        write_curve(args.out, f"SB3 SAC on dhrl.sb3.make_vec: {args.task}, Δ = {args.delay}", curve)  # after every evaluation: an interrupted run keeps its curve
     print(f"curve: {args.out.with_suffix('.csv')}, {args.out.with_suffix('.svg')}")
 
 
