@@ -143,14 +143,6 @@ impl DelayLayer for CpuDelayLayer {
         let l = self.layout;
         input.check(&l)?;
         let (obs, act) = (l.obs_dim, l.act_dim);
-        let every_copy_steps;
-        let controls = match input.controls {
-            Some(controls) => controls,
-            None => {
-                every_copy_steps = vec![CopyStep::Step; l.copies];
-                &every_copy_steps
-            }
-        };
         (
             self.counters.par_iter_mut(),
             self.ring.par_chunks_mut(l.ring_len() * l.stride()),
@@ -165,7 +157,7 @@ impl DelayLayer for CpuDelayLayer {
             input.rewards.par_iter(),
             input.terminated.par_iter(),
             input.truncated.par_iter(),
-            controls.par_iter(),
+            (0..l.copies).into_par_iter(),
         )
             .into_par_iter()
             .with_min_len(64)
@@ -182,7 +174,7 @@ impl DelayLayer for CpuDelayLayer {
                     &reward,
                     &terminated,
                     &truncated,
-                    &control,
+                    copy,
                 )| {
                     let input = CopyInput {
                         action,
@@ -191,7 +183,7 @@ impl DelayLayer for CpuDelayLayer {
                         reward,
                         terminated: terminated != 0,
                         truncated: truncated != 0,
-                        control,
+                        control: input.control(copy),
                     };
                     step_copy(
                         &l,

@@ -346,8 +346,9 @@ impl GpuDelayLayer {
                 CopyStep::Hold => IN_HELD,
                 CopyStep::Restart => IN_RESTART,
             };
-            self.flags_scratch[i] = control | if starts(i) { resets << 4 } else { 0 };
-            resets += u32::from(starts(i));
+            let starts = starts(i);
+            self.flags_scratch[i] = control | if starts { resets << 4 } else { 0 };
+            resets += u32::from(starts);
         }
         for i in (0..l.copies).filter(|&i| starts(i)) {
             self.input_scratch
@@ -415,13 +416,13 @@ impl GpuDelayLayer {
         Ok(values)
     }
 
-    /// `[N, obs + Δ·act]`: `x_t` of every copy, read back from the device.
     /// `[N, 2Δ + 3, obs + act + 1]`: every copy's ring.
     fn read_ring(&self) -> Result<Vec<f32>, GpuError> {
         let l = self.layout;
         self.read(&self.ring, l.copies * l.ring_len() * l.stride())
     }
 
+    /// `[N, obs + Δ·act]`: `x_t` of every copy, read back from the device.
     pub fn read_augmented(&self) -> Result<Vec<f32>, GpuError> {
         self.read(
             &self.augmented,
