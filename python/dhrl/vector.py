@@ -283,8 +283,6 @@ class DelayedVectorEnv(VectorEnv):
                 final_obs = np.full(self.num_envs, None, dtype=object)
                 for i in np.flatnonzero(done):
                     final_obs[i] = out["final_augmented"][i]
-                final_ready = out["ready"].copy()
-                final_ready[done] = out["episode_length"][done] >= self.delay
                 info["final_obs"] = final_obs
                 info["_final_obs"] = done
                 info["final_observation"] = final_obs
@@ -292,7 +290,7 @@ class DelayedVectorEnv(VectorEnv):
                 info["final_info"] = {
                     "state": np.where(done[:, None], out["final_state"], 0.0).astype(np.float32),
                     "_state": done,
-                    "ready": final_ready & done,
+                    "ready": done & (out["episode_length"] >= self.delay),
                     "_ready": done,
                     "episode": info["episode"],
                     "_episode": done,
