@@ -1,7 +1,11 @@
 """Stable-Baselines3's SAC, unchanged, on a delayed dhrl task: the policy sees the augmented
 states x_t, so this is augmented SAC (one of the paper's baselines).
 
-    python examples/python/sb3_sac.py --steps 30000 --out docs/python/sb3_sac
+    python examples/python/sb3_sac.py --steps 100000 --eval-every 5000 --out docs/python/sb3_sac
+
+The networks default to two hidden layers of 64 (SB3's own default is 256 × 256): on a 2-core
+CPU that is 4× faster per gradient step and is plenty for InvertedPendulum's 9-dimensional
+augmented state at Δ = 5.
 
 Needs ``pip install './python[sb3]'``.
 """
@@ -26,11 +30,16 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=30_000)
     parser.add_argument("--eval-every", type=int, default=2_500)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--net-arch", type=lambda text: [int(width) for width in text.split(",")], default=[64, 64],
+                        help="hidden layer widths of actor and critics, comma-separated (default 64,64)")
     parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/python/sb3_sac"))
     args = parser.parse_args()
 
     env = dhrl.sb3.make_vec(args.task, 1, delay=args.delay, seed=args.seed)
-    model = SAC("MlpPolicy", env, learning_starts=5_000, seed=args.seed, device="cpu", verbose=0)
+    # The temperature starts at 0.2 and is tuned to −dim(A), as in dhrl's own SAC (SB3's "auto"
+    # would start it at 1.0).
+    model = SAC("MlpPolicy", env, learning_starts=5_000, ent_coef="auto_0.2",
+                policy_kwargs=dict(net_arch=args.net_arch), seed=args.seed, device="cpu", verbose=0)
 
     def greedy(x: np.ndarray) -> np.ndarray:
         return model.predict(x, deterministic=True)[0]

@@ -1,8 +1,13 @@
 """``python -m dhrl.bench``: environment steps per second of ``dhrl.make_vec`` beside what a
 Python user runs today, measured in the same run on this machine: Gymnasium's
 ``SyncVectorEnv`` and ``AsyncVectorEnv`` of ``<Task>-v4`` wrapped in ``DelayObservation``, and
-EnvPool at Δ = 0 when it is installed. Random actions, resets included; every vector step
-counts ``num_envs`` environment steps.
+EnvPool at Δ = 0 when it is installed. Random actions, uniform in the task's action bounds,
+resets included; every vector step counts ``num_envs`` environment steps.
+
+Every column executes the same random actions: ``DelayObservation`` passes the agent's
+actions on from the first step, so dhrl's delayed env runs with ``warmup="random"`` (uniform
+in the bounds too) rather than its default zeros, which would change the physics being timed
+(a Humanoid given zero torques for Δ steps is a different, costlier contact problem).
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ def measure(step: Callable[[np.ndarray], object], actions: np.ndarray, seconds: 
 def bench_dhrl(gym_id: str, num_envs: int, delay: int, threads: int, actions, seconds) -> float:
     import dhrl
 
-    env = dhrl.make_vec(gym_id, num_envs, delay=delay, num_threads=threads)
+    env = dhrl.make_vec(gym_id, num_envs, delay=delay, num_threads=threads, warmup="random")
     env.reset(seed=0)
     try:
         return measure(env.step, actions, seconds)
@@ -122,8 +127,9 @@ def main(argv: list[str] | None = None) -> int:
     for task in tasks:
         gym_id = dhrl.TASKS.get(task, task)
         for n in sizes:
-            act_dim = dhrl.make_vec(gym_id, 1).act_dim
-            actions = np.random.default_rng(0).uniform(-1, 1, (64, n, act_dim)).astype(np.float32)
+            space = dhrl.make_vec(gym_id, 1).single_action_space
+            low, high = space.low, space.high
+            actions = np.random.default_rng(0).uniform(low, high, (64, n, low.size)).astype(np.float32)
             row = {
                 "task": gym_id,
                 "copies": n,

@@ -12,6 +12,10 @@ use crate::sim::CopyStep;
 use crate::snapshot::SnapshotError;
 use std::io::{Read, Write};
 
+/// Copies one rayon task steps at least; a layer of no more copies steps them on the calling
+/// thread (a copy's step is a few hundred nanoseconds of copying: less than a hand-off to the pool).
+const COPIES_PER_WORKER: usize = 64;
+
 /// The delay layer on the CPU: per copy, a ring of the last 2Δ + 3 steps `(s_τ, a_τ, r_τ)`.
 pub struct CpuDelayLayer {
     layout: DelayLayout,
@@ -73,6 +77,22 @@ pub(super) struct CopyInput<'a> {
     pub control: CopyStep,
 }
 
+impl<'a> CopyInput<'a> {
+    /// Copy `i`'s rows of `input`.
+    fn of(input: &StepInput<'a>, l: &DelayLayout, i: usize) -> CopyInput<'a> {
+        let (obs, act) = (l.obs_dim, l.act_dim);
+        CopyInput {
+            action: &input.actions[i * act..(i + 1) * act],
+            observation: &input.observations[i * obs..(i + 1) * obs],
+            final_observation: &input.final_observations[i * obs..(i + 1) * obs],
+            reward: input.rewards[i],
+            terminated: input.terminated[i] != 0,
+            truncated: input.truncated[i] != 0,
+            control: input.control(i),
+        }
+    }
+}
+
 /// The outputs of one copy, as slices of the batch arrays.
 pub(super) struct CopyState<'a> {
     pub counters: &'a mut CopyCounters,
@@ -107,6 +127,20 @@ impl CpuDelayLayer {
     pub fn counters(&self) -> &[CopyCounters] {
         &self.counters
     }
+
+    /// Copy `i`'s rows of the layer's arrays.
+    fn copy_state(&mut self, i: usize) -> CopyState<'_> {
+        let l = self.layout;
+        let (ring, augmented) = (l.ring_len() * l.stride(), l.augmented_dim());
+        let (slots, stride) = (l.record_slots(), l.stride());
+        CopyState {
+            counters: &mut self.counters[i],
+            ring: &mut self.ring[i * ring..(i + 1) * ring],
+            augmented: &mut self.augmented[i * augmented..(i + 1) * augmented],
+            meta: &mut self.records.meta[i * slots..(i + 1) * slots],
+            data: &mut self.records.data[i * slots * stride..(i + 1) * slots * stride],
+        }
+    }
 }
 
 impl DelayLayer for CpuDelayLayer {
@@ -123,18 +157,12 @@ impl DelayLayer for CpuDelayLayer {
         )?;
         self.ring.fill(0.0);
         self.records = RecordBatch::new(l);
-        let (ring_len, stride) = (l.ring_len(), l.stride());
         for (i, s0) in observations.chunks(l.obs_dim).enumerate() {
-            let mut copy = CopyState {
-                counters: &mut self.counters[i],
-                ring: &mut self.ring[i * ring_len * stride..(i + 1) * ring_len * stride],
-                augmented: &mut self.augmented[i * l.augmented_dim()..(i + 1) * l.augmented_dim()],
-                meta: &mut [],
-                data: &mut [],
-            };
+            let mut copy = self.copy_state(i);
             *copy.counters = CopyCounters::default();
             start_episode(&l, &mut copy, s0, false);
-            self.ready[i] = copy.counters.ready;
+            let ready = copy.counters.ready;
+            self.ready[i] = ready;
         }
         Ok(())
     }
@@ -142,62 +170,37 @@ impl DelayLayer for CpuDelayLayer {
     fn step(&mut self, input: &StepInput<'_>) -> Result<(), DelayError> {
         let l = self.layout;
         input.check(&l)?;
-        let (obs, act) = (l.obs_dim, l.act_dim);
-        (
-            self.counters.par_iter_mut(),
-            self.ring.par_chunks_mut(l.ring_len() * l.stride()),
-            self.augmented.par_chunks_mut(l.augmented_dim()),
-            self.records.meta.par_chunks_mut(l.record_slots()),
-            self.records
-                .data
-                .par_chunks_mut(l.record_slots() * l.stride()),
-            input.actions.par_chunks(act),
-            input.observations.par_chunks(obs),
-            input.final_observations.par_chunks(obs),
-            input.rewards.par_iter(),
-            input.terminated.par_iter(),
-            input.truncated.par_iter(),
-            (0..l.copies).into_par_iter(),
-        )
-            .into_par_iter()
-            .with_min_len(64)
-            .for_each(
-                |(
-                    counters,
-                    ring,
-                    augmented,
-                    meta,
-                    data,
-                    action,
-                    observation,
-                    final_observation,
-                    &reward,
-                    &terminated,
-                    &truncated,
-                    copy,
-                )| {
-                    let input = CopyInput {
-                        action,
-                        observation,
-                        final_observation,
-                        reward,
-                        terminated: terminated != 0,
-                        truncated: truncated != 0,
-                        control: input.control(copy),
+        let step_one = |copy: usize, mut state: CopyState<'_>| {
+            step_copy(&l, &mut state, &CopyInput::of(input, &l, copy));
+        };
+        if l.copies <= COPIES_PER_WORKER {
+            for copy in 0..l.copies {
+                step_one(copy, self.copy_state(copy));
+            }
+        } else {
+            (
+                self.counters.par_iter_mut(),
+                self.ring.par_chunks_mut(l.ring_len() * l.stride()),
+                self.augmented.par_chunks_mut(l.augmented_dim()),
+                self.records.meta.par_chunks_mut(l.record_slots()),
+                self.records
+                    .data
+                    .par_chunks_mut(l.record_slots() * l.stride()),
+                (0..l.copies).into_par_iter(),
+            )
+                .into_par_iter()
+                .with_min_len(COPIES_PER_WORKER)
+                .for_each(|(counters, ring, augmented, meta, data, copy)| {
+                    let state = CopyState {
+                        counters,
+                        ring,
+                        augmented,
+                        meta,
+                        data,
                     };
-                    step_copy(
-                        &l,
-                        &mut CopyState {
-                            counters,
-                            ring,
-                            augmented,
-                            meta,
-                            data,
-                        },
-                        &input,
-                    );
-                },
-            );
+                    step_one(copy, state);
+                });
+        }
         for (ready, c) in self.ready.iter_mut().zip(&self.counters) {
             *ready = c.ready;
         }

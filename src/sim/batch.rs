@@ -277,9 +277,41 @@ impl BatchedEnv {
         }
         let noise = self.actuator_noise;
         let model = &self.model;
+        let step_one =
+            |copy: &mut EnvCopy, control: CopyStep, action: &[f32], out: CopyOutputs<'_>| {
+                match control {
+                    CopyStep::Step => copy.step(model, action, noise, out),
+                    CopyStep::Hold => out.clear_step(),
+                    CopyStep::Restart => copy.restart(out),
+                }
+            };
+        let threads = self.pool.current_num_threads();
+        if threads == 1 || self.copies.len() == 1 {
+            // One worker's work: stepped on the calling thread, without the hand-off to the pool.
+            for (i, copy) in self.copies.iter_mut().enumerate() {
+                let rows = i * obs_dim..(i + 1) * obs_dim;
+                let out = CopyOutputs {
+                    obs: &mut self.observations[rows.clone()],
+                    final_obs: &mut self.final_observations[rows],
+                    reward: &mut self.rewards[i],
+                    terminated: &mut self.terminated[i],
+                    truncated: &mut self.truncated[i],
+                    diverged: &mut self.diverged[i],
+                    episode_return: &mut self.episode_returns[i],
+                    episode_length: &mut self.episode_lengths[i],
+                };
+                step_one(
+                    copy,
+                    self.controls[i],
+                    &actions[i * act_dim..(i + 1) * act_dim],
+                    out,
+                );
+            }
+            return Ok(());
+        }
         // Small enough chunks that the threads finish together, big enough that the pool's
         // overhead stays small for cheap tasks.
-        let min_len = (self.copies.len() / (64 * self.pool.current_num_threads())).max(1);
+        let min_len = (self.copies.len() / (64 * threads)).max(1);
         self.pool.install(|| {
             (
                 self.copies.par_iter_mut(),
@@ -307,8 +339,8 @@ impl BatchedEnv {
                         terminated,
                         truncated,
                         diverged,
-                        ret,
-                        len,
+                        episode_return,
+                        episode_length,
                     )| {
                         let out = CopyOutputs {
                             obs,
@@ -317,14 +349,10 @@ impl BatchedEnv {
                             terminated,
                             truncated,
                             diverged,
-                            episode_return: ret,
-                            episode_length: len,
+                            episode_return,
+                            episode_length,
                         };
-                        match control {
-                            CopyStep::Step => copy.step(model, action, noise, out),
-                            CopyStep::Hold => out.clear_step(),
-                            CopyStep::Restart => copy.restart(out),
-                        }
+                        step_one(copy, control, action, out);
                     },
                 );
         });
