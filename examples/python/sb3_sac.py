@@ -1,7 +1,7 @@
 """Stable-Baselines3's SAC, unchanged, on a delayed dhrl task: the policy sees the augmented
 states x_t, so this is augmented SAC (one of the paper's baselines).
 
-    python examples/python/sb3_sac.py --steps 100000 --eval-every 5000 --out docs/python/sb3_sac
+    python examples/python/sb3_sac.py --out docs/python/sb3_sac
 
 The networks default to two hidden layers of 64 (SB3's own default is 256 × 256): on a 2-core
 CPU that is 4× faster per gradient step and is plenty for InvertedPendulum's 9-dimensional
@@ -27,8 +27,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", default="InvertedPendulum-v4")
     parser.add_argument("--delay", type=int, default=5)
-    parser.add_argument("--steps", type=int, default=30_000)
-    parser.add_argument("--eval-every", type=int, default=2_500)
+    parser.add_argument("--steps", type=int, default=100_000)
+    parser.add_argument("--eval-every", type=int, default=5_000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--net-arch", type=lambda text: [int(width) for width in text.split(",")], default=[64, 64],
                         help="hidden layer widths of actor and critics, comma-separated (default 64,64)")
