@@ -33,7 +33,7 @@ fn batched_step(c: &mut Criterion) {
         group.throughput(Throughput::Elements(1));
         group.bench_function("raw mj_step, 1 thread", |b| {
             b.iter_custom(|iters| {
-                let rate = raw_mj_step_rate(task, iters as usize).unwrap();
+                let rate = raw_mj_step_rate(task, 1, iters as usize).unwrap();
                 std::time::Duration::from_secs_f64(iters as f64 / rate)
             })
         });

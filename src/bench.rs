@@ -39,32 +39,84 @@ impl ActionTable {
     }
 }
 
-/// Environment steps per second of one copy stepped by bare `mj_step` calls on this thread:
-/// random controls, `frame_skip` substeps per environment step, `mj_resetData` when the task
-/// terminates or hits the time limit (so the states visited match the batched run's), and
-/// nothing else: no observation, reward, `mj_rnePostConstraint` or copying.
-pub fn raw_mj_step_rate(task: TaskName, env_steps: usize) -> Result<f64, SimError> {
+/// Environment steps per second of `copies` copies stepped in turn by bare `mj_step` calls on
+/// this thread: random controls, `frame_skip` substeps per environment step, `mj_resetData`
+/// when the task terminates or hits the time limit (so the states visited match the batched
+/// run's), and nothing else: no observation, reward, `mj_rnePostConstraint` or copying. One copy
+/// stays hot in the core's caches; many copies (a batch's worth) do not, as in a batch.
+pub fn raw_mj_step_rate(task: TaskName, copies: usize, env_steps: usize) -> Result<f64, SimError> {
     let model = TaskModel::load(task)?;
     let def = model.task;
-    let actions = ActionTable::uniform(&model.action_low, &model.action_high, 1, 64, 7);
-    let mut data = MjData::new(model.model.clone());
-    let mut elapsed = 0;
+    let copies = copies.max(1);
+    let actions = ActionTable::uniform(&model.action_low, &model.action_high, copies, 64, 7);
+    let mut data: Vec<MjData<_>> = (0..copies)
+        .map(|_| MjData::new(model.model.clone()))
+        .collect();
+    let mut elapsed = vec![0; copies];
+    let act = model.action_low.len();
     let start = Instant::now();
     for step in 0..env_steps {
-        for (c, &a) in data.ctrl_mut().iter_mut().zip(actions.row(step)) {
+        let (i, round) = (step % copies, step / copies);
+        let d = &mut data[i];
+        for (c, &a) in d
+            .ctrl_mut()
+            .iter_mut()
+            .zip(&actions.row(round)[i * act..(i + 1) * act])
+        {
             *c = a as f64;
         }
         for _ in 0..def.frame_skip {
-            data.step();
+            d.step();
         }
-        elapsed += 1;
-        if (def.terminated)(&data) || elapsed >= MAX_EPISODE_STEPS {
-            data.reset();
-            data.forward();
-            elapsed = 0;
+        elapsed[i] += 1;
+        if (def.terminated)(d) || elapsed[i] >= MAX_EPISODE_STEPS {
+            d.reset();
+            d.forward();
+            elapsed[i] = 0;
         }
     }
     Ok(env_steps as f64 / start.elapsed().as_secs_f64())
+}
+
+/// The machine a measurement ran on: every `dhrl bench` report names it.
+#[derive(Debug, Clone, Serialize)]
+pub struct Machine {
+    /// The CPU's model name (`/proc/cpuinfo`), or "unknown".
+    pub cpu: String,
+    pub cores: usize,
+    /// Whether the measuring threads flush subnormal floats ([`crate::float_mode`]).
+    pub flush_subnormals: bool,
+}
+
+impl Machine {
+    pub fn here() -> Machine {
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|info| {
+                info.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split_once(':'))
+                    .map(|(_, name)| name.trim().to_string())
+            })
+            .unwrap_or_else(|| "unknown".into());
+        Machine {
+            cpu,
+            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            flush_subnormals: crate::float_mode::flushing(),
+        }
+    }
+}
+
+impl std::fmt::Display for Machine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} ({} cores), subnormals flushed: {}",
+            self.cpu,
+            self.cores,
+            if self.flush_subnormals { "yes" } else { "no" }
+        )
+    }
 }
 
 /// A batch without actuator noise and 16 rows of random actions to cycle through.
@@ -92,50 +144,89 @@ pub struct EnvBenchReport {
     pub task: TaskName,
     pub envs: usize,
     pub threads: usize,
+    /// Total delay Δ of the timed batch (0: the simulator alone; above: the delayed batch of
+    /// training, delay layer on the CPU, random warm-up actions).
+    pub delay: usize,
     pub steps: usize,
     pub env_steps_per_sec: f64,
+    /// The anchor: one copy, bare `mj_step`, one thread, hot in cache.
     pub raw_env_steps_per_sec: f64,
     /// `env_steps_per_sec / raw_env_steps_per_sec`; the ideal is the thread count.
     pub ratio: f64,
+    /// The same bare loop over `envs` copies in turn on one thread: what the physics costs
+    /// once a batch's copies no longer fit in the core's caches.
+    pub raw_batch_env_steps_per_sec: f64,
+    /// `env_steps_per_sec / raw_batch_env_steps_per_sec`.
+    pub ratio_to_raw_batch: f64,
     pub episodes_finished: u64,
+    #[serde(flatten)]
+    pub machine: Machine,
 }
 
-/// Steps a batch of `envs` copies `steps` times with random actions, then times the raw
-/// single-thread `mj_step` loop over one thread's share of those environment steps (at least
-/// 1,000), so both sides run for about as long.
+/// Steps a batch of `envs` copies (under delay `delay` when above 0) `steps` times with random
+/// actions, then times the raw single-thread `mj_step` loops (one copy, and `envs` copies) over
+/// one thread's share of those environment steps (at least 1,000), so every side runs for
+/// about as long.
 pub fn bench_env(
     task: TaskName,
     envs: usize,
     threads: usize,
+    delay: usize,
     steps: usize,
     seed: u64,
-) -> Result<EnvBenchReport, SimError> {
-    let (mut batch, actions) = noiseless_batch(task, envs, threads, seed)?;
+) -> Result<EnvBenchReport, BenchError> {
+    use crate::delay::{DelayConfig, DelayDevice, DelayedBatch, WarmupActions};
+    let config = BatchConfig {
+        task,
+        envs,
+        threads,
+        seed,
+        actuator_noise: 0.0,
+    };
+    let delay_config = DelayConfig {
+        warmup: WarmupActions::Random,
+        ..DelayConfig::fixed(delay)
+    };
+    let mut batch = DelayedBatch::new(&config, &delay_config, DelayDevice::Cpu, seed)?;
+    let (low, high) = batch.env().action_bounds();
+    let actions = ActionTable::uniform(low, high, envs, 16, seed);
+    let mut row = actions.row(0).to_vec();
+    let mut step = |batch: &mut DelayedBatch, k: usize| -> Result<(), BenchError> {
+        row.copy_from_slice(actions.row(k));
+        batch.layer_mut().fill_warmup(&mut row)?;
+        Ok(batch.step(&row)?)
+    };
     // Warm up caches and the pool before timing.
-    batch.step(actions.row(0))?;
+    step(&mut batch, 0)?;
     let mut episodes_finished = 0u64;
     let start = Instant::now();
-    for step in 0..steps {
-        batch.step(actions.row(step + 1))?;
-        episodes_finished += batch
+    for k in 0..steps {
+        step(&mut batch, k + 1)?;
+        let env = batch.env();
+        episodes_finished += env
             .terminated()
             .iter()
-            .zip(batch.truncated())
+            .zip(env.truncated())
             .filter(|(t, u)| **t + **u > 0)
             .count() as u64;
     }
     let env_steps_per_sec = (envs * steps) as f64 / start.elapsed().as_secs_f64();
     let raw_steps = (envs * steps / threads).max(1000);
-    let raw_env_steps_per_sec = raw_mj_step_rate(task, raw_steps)?;
+    let raw_env_steps_per_sec = raw_mj_step_rate(task, 1, raw_steps)?;
+    let raw_batch_env_steps_per_sec = raw_mj_step_rate(task, envs, raw_steps)?;
     Ok(EnvBenchReport {
         task,
         envs,
         threads,
+        delay,
         steps,
         env_steps_per_sec,
         raw_env_steps_per_sec,
         ratio: env_steps_per_sec / raw_env_steps_per_sec,
+        raw_batch_env_steps_per_sec,
+        ratio_to_raw_batch: env_steps_per_sec / raw_batch_env_steps_per_sec,
         episodes_finished,
+        machine: Machine::here(),
     })
 }
 
@@ -143,6 +234,8 @@ pub fn bench_env(
 pub enum BenchError {
     #[error(transparent)]
     Sim(#[from] SimError),
+    #[error(transparent)]
+    Batch(#[from] crate::delay::BatchError),
     #[error(transparent)]
     Delay(#[from] crate::delay::DelayError),
     #[error(transparent)]
@@ -251,6 +344,8 @@ pub struct UpdateBenchReport {
     pub updates: usize,
     pub updates_per_sec: f64,
     pub ms_per_update: f64,
+    #[serde(flatten)]
+    pub machine: Machine,
 }
 
 /// Gradient updates per second of `algo` at the sizes of `task` under delay `delay`, on
@@ -297,5 +392,7 @@ pub fn bench_update(
         updates,
         updates_per_sec: updates as f64 / seconds,
         ms_per_update: 1e3 * seconds / updates as f64,
+        // The threads that ran the updates.
+        machine: pool.install(Machine::here),
     })
 }

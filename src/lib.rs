@@ -3,6 +3,7 @@ pub mod algos;
 pub mod bench;
 pub mod charts;
 pub mod delay;
+pub mod float_mode;
 pub mod learn;
 pub mod report;
 pub mod rollout;

@@ -189,3 +189,30 @@ fn unknown_task_names_list_the_valid_ones() {
         assert_eq!(task.as_str().parse::<TaskName>().unwrap(), task);
     }
 }
+
+/// The float mode (src/float_mode.rs): on in every simulation and learner pool thread, set on a
+/// caller's thread only for as long as a guard lives, and the caller's own mode back after it.
+#[test]
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+fn pool_threads_flush_subnormals_and_a_caller_thread_gets_its_mode_back() {
+    use dhrl::float_mode::{FlushGuard, enabled, flushing, subnormal_product_is_zero};
+    let on = enabled();
+    let env = batch(TaskName::HalfCheetah, 4, 2, 0, 0.0);
+    assert_eq!(env.workers_flush_subnormals(), vec![on; 2]);
+    let learners = dhrl::train::learner_pool(2).unwrap();
+    assert_eq!(
+        learners.broadcast(|_| (flushing(), subnormal_product_is_zero())),
+        vec![(on, on); 2]
+    );
+    // The test harness's thread is not dhrl's: it starts in the default mode.
+    assert!(!flushing() && !subnormal_product_is_zero());
+    {
+        let _mode = FlushGuard::new();
+        assert_eq!(subnormal_product_is_zero(), on);
+        // One copy steps on this thread, and leaves its mode as it found it.
+        let mut one = batch(TaskName::HalfCheetah, 1, 1, 0, 0.0);
+        one.step(&constant_actions(&one, 0.1)).unwrap();
+        assert_eq!(subnormal_product_is_zero(), on);
+    }
+    assert!(!flushing() && !subnormal_product_is_zero());
+}

@@ -4,6 +4,11 @@ Python user runs today, measured in the same run on this machine: Gymnasium's
 EnvPool at Δ = 0 when it is installed. Random actions, uniform in the task's action bounds,
 resets included; every vector step counts ``num_envs`` environment steps.
 
+Beside them, in the same process, the two anchors of dhrl's own path: the same batch stepped
+inside the library with nothing built for Python ("Rust", ``Batch.time_native_steps``), and
+one copy stepped by bare ``mj_step`` calls on one thread ("raw", hot in cache; the physical
+limit of a batch is about the thread count times it).
+
 Every column executes the same random actions: ``DelayObservation`` passes the agent's
 actions on from the first step, so dhrl's delayed env runs with ``warmup="random"`` (uniform
 in the bounds too) rather than its default zeros, which would change the physics being timed
@@ -47,6 +52,38 @@ def bench_dhrl(gym_id: str, num_envs: int, delay: int, threads: int, actions, se
         env.close()
 
 
+def bench_native(gym_id: str, num_envs: int, delay: int, threads: int, actions, seconds) -> float:
+    """The batch of ``bench_dhrl`` stepped inside the library, nothing returned to Python."""
+    import dhrl
+
+    env = dhrl.make_vec(gym_id, num_envs, delay=delay, num_threads=threads, warmup="random")
+    env.reset(seed=0)
+    try:
+        table = np.ascontiguousarray(actions, np.float32)
+        env._batch.time_native_steps(table, 5)
+        steps, elapsed = 8, 0.0
+        while elapsed < seconds:
+            elapsed = env._batch.time_native_steps(table, steps)
+            steps *= 2
+        return steps // 2 * num_envs / elapsed
+    finally:
+        env.close()
+
+
+def bench_raw(gym_id: str, seconds: float) -> float:
+    """One copy, bare ``mj_step`` on this thread."""
+    import dhrl
+    from dhrl import _dhrl
+
+    task = dhrl.task_name(gym_id)
+    steps = 1000
+    while True:
+        rate = _dhrl.raw_mj_step_rate(task, 1, steps)
+        if steps / rate >= seconds:
+            return rate
+        steps *= 2
+
+
 def bench_gymnasium(gym_id: str, num_envs: int, delay: int, kind: str, actions, seconds) -> float:
     import gymnasium as gym
     from gymnasium.wrappers import DelayObservation
@@ -77,6 +114,17 @@ def bench_envpool(gym_id: str, num_envs: int, threads: int, actions, seconds) ->
         env.close()
 
 
+def cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as info:
+            for line in info:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown CPU"
+
+
 def ratio(a: float | None, b: float | None) -> str:
     return f"{a / b:.2f}×" if a and b else "–"
 
@@ -87,7 +135,7 @@ def rate(value: float | None) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m dhrl.bench", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--tasks", default="HalfCheetah-v4,Humanoid-v4")
+    parser.add_argument("--tasks", default="HalfCheetah-v4,Humanoid-v4", help="comma-separated, or 'all'")
     parser.add_argument("--envs", default="1,16,256", help="comma-separated copy counts")
     parser.add_argument("--delay", type=int, default=20, help="the delayed configuration's Δ")
     parser.add_argument("--threads", type=int, default=os.cpu_count() or 1, help="dhrl's and EnvPool's threads")
@@ -106,8 +154,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--envs {args.envs!r}: expected comma-separated integers ≥ 1, e.g. 1,16,256")
     if args.delay < 0 or args.threads < 1 or args.seconds <= 0:
         parser.error("--delay must be ≥ 0, --threads ≥ 1 and --seconds > 0")
-    tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
     import dhrl
+
+    if args.tasks.strip() == "all":
+        args.tasks = ",".join(dhrl.TASKS.values())
+    tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
 
     for task in tasks:
         try:
@@ -117,13 +168,18 @@ def main(argv: list[str] | None = None) -> int:
 
     delay = args.delay
     header = (
-        f"| task | copies | dhrl Δ=0 | dhrl Δ={delay} | Gymnasium Sync Δ={delay} | Gymnasium Async Δ={delay} "
-        f"| EnvPool Δ=0 | dhrl Δ={delay} / best Gymnasium | dhrl / EnvPool (Δ=0) | Δ={delay} / Δ=0 |"
+        f"| task | copies | raw mj_step (1 copy, 1 thread) | dhrl Rust Δ={delay} | dhrl Δ=0 | dhrl Δ={delay} "
+        f"| Gymnasium Sync Δ={delay} | Gymnasium Async Δ={delay} | EnvPool Δ=0 "
+        f"| Python / Rust (Δ={delay}) | Rust / raw | dhrl Δ={delay} / best Gymnasium | dhrl / EnvPool (Δ=0) "
+        f"| Δ={delay} / Δ=0 |"
     )
     if not args.json:
-        print(f"env steps/s, {args.threads} dhrl/EnvPool threads, {args.seconds:g} s per cell, {os.cpu_count()} cores")
+        print(
+            f"env steps/s on {cpu_model()}, {args.threads} dhrl/EnvPool threads, {args.seconds:g} s per cell, "
+            f"{os.cpu_count()} cores"
+        )
         print(header)
-        print("|" + "---|" * 10)
+        print("|" + "---|" * 14)
     for task in tasks:
         gym_id = dhrl.TASKS.get(task, task)
         for n in sizes:
@@ -133,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
             row = {
                 "task": gym_id,
                 "copies": n,
+                "raw": bench_raw(gym_id, args.seconds),
+                "dhrl_native_delayed": bench_native(gym_id, n, delay, args.threads, actions, args.seconds),
                 "dhrl_delay0": bench_dhrl(gym_id, n, 0, args.threads, actions, args.seconds),
                 "dhrl_delayed": bench_dhrl(gym_id, n, delay, args.threads, actions, args.seconds),
                 "gym_sync": bench_gymnasium(gym_id, n, delay, "sync", actions, args.seconds),
@@ -144,14 +202,18 @@ def main(argv: list[str] | None = None) -> int:
                 "envpool_delay0": bench_envpool(gym_id, n, args.threads, actions, args.seconds),
                 "delay": delay,
                 "threads": args.threads,
+                "cpu": cpu_model(),
             }
             best_gym = max(v for v in (row["gym_sync"], row["gym_async"]) if v)
             if args.json:
                 print(json.dumps(row), flush=True)
             else:
                 print(
-                    f"| {gym_id} | {n} | {rate(row['dhrl_delay0'])} | {rate(row['dhrl_delayed'])} "
+                    f"| {gym_id} | {n} | {rate(row['raw'])} | {rate(row['dhrl_native_delayed'])} "
+                    f"| {rate(row['dhrl_delay0'])} | {rate(row['dhrl_delayed'])} "
                     f"| {rate(row['gym_sync'])} | {rate(row['gym_async'])} | {rate(row['envpool_delay0'])} "
+                    f"| {ratio(row['dhrl_delayed'], row['dhrl_native_delayed'])} "
+                    f"| {ratio(row['dhrl_native_delayed'], row['raw'])} "
                     f"| {ratio(row['dhrl_delayed'], best_gym)} | {ratio(row['dhrl_delay0'], row['envpool_delay0'])} "
                     f"| {ratio(row['dhrl_delayed'], row['dhrl_delay0'])} |",
                     flush=True,

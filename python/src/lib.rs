@@ -1,11 +1,13 @@
 //! `dhrl._dhrl`: the batched delayed tasks of the `dhrl` library as one Python class. It only
 //! moves arrays across: every semantic (delay layer, warm-up, autoreset, records) is the
 //! library's [`DelayedBatch`], the path training runs; `dhrl/vector.py` builds Gymnasium's
-//! interface on top.
+//! interface on top. Whatever runs on the caller's thread runs under a [`FlushGuard`]: dhrl's
+//! float mode while it runs, the caller's own restored when it returns.
 use std::str::FromStr;
 use std::sync::Mutex;
 
 use dhrl::delay::{DelayConfig, DelayDevice, DelayedBatch, WarmupActions};
+use dhrl::float_mode::FlushGuard;
 use dhrl::seeds;
 use dhrl::sim::{BatchConfig, CopyStep};
 use dhrl::tasks::TaskName;
@@ -26,6 +28,7 @@ struct Core {
 
 impl Core {
     fn build(config: BatchConfig, delay: DelayConfig) -> PyResult<Core> {
+        let _mode = FlushGuard::new();
         let batch = DelayedBatch::new(
             &config,
             &delay,
@@ -163,6 +166,11 @@ impl Batch {
     fn augmented_dim(&self) -> usize {
         self.obs_dim + self.delay * self.act_dim
     }
+    /// Per worker thread of the copies' pool, whether it flushes subnormal floats (the caller's
+    /// own thread is left as it was).
+    fn workers_flush_subnormals(&self) -> PyResult<Vec<bool>> {
+        Ok(self.lock()?.batch.env().workers_flush_subnormals())
+    }
     #[getter]
     fn num_threads(&self) -> PyResult<usize> {
         Ok(self.lock()?.batch.env().threads())
@@ -204,7 +212,10 @@ impl Batch {
         qvel: Vec<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let mut core = self.lock()?;
-        core.batch.restart_from(&qpos, &qvel).map_err(value_error)?;
+        {
+            let _mode = FlushGuard::new();
+            core.batch.restart_from(&qpos, &qvel).map_err(value_error)?;
+        }
         current(py, &core)
     }
 
@@ -212,6 +223,45 @@ impl Batch {
     fn current<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let core = self.lock()?;
         current(py, &core)
+    }
+
+    /// Seconds `steps` steps of every copy take inside the library, actions cycling through the
+    /// `[K, N, act]` float32 table and warm-up rows filled in as [`Batch::step`] does, with
+    /// nothing built for Python: the native rate `python -m dhrl.bench` sets the Python path
+    /// beside, in the same process.
+    fn time_native_steps(
+        &self,
+        py: Python<'_>,
+        actions: numpy::PyReadonlyArray3<'_, f32>,
+        steps: usize,
+    ) -> PyResult<f64> {
+        let mut guard = self.lock()?;
+        let core = &mut *guard;
+        let table = actions.as_slice().map_err(value_error)?;
+        let row = core.actions.len();
+        if row == 0 || table.is_empty() || table.len() % row != 0 {
+            return Err(PyValueError::new_err(format!(
+                "actions hold {} values; expected [K, {}, {}] with K ≥ 1",
+                table.len(),
+                self.num_envs,
+                self.act_dim
+            )));
+        }
+        py.detach(|| -> PyResult<f64> {
+            let _mode = FlushGuard::new();
+            let Core { batch, actions, .. } = &mut *core;
+            let rows = table.len() / row;
+            let start = std::time::Instant::now();
+            for k in 0..steps {
+                actions.copy_from_slice(&table[(k % rows) * row..(k % rows + 1) * row]);
+                batch
+                    .layer_mut()
+                    .fill_warmup(actions)
+                    .map_err(value_error)?;
+                batch.step(actions).map_err(value_error)?;
+            }
+            Ok(start.elapsed().as_secs_f64())
+        })
     }
 
     /// One step of every copy. `actions`: `[N, act]` float32; the rows of copies still in
@@ -263,6 +313,7 @@ impl Batch {
             }
         }
         py.detach(|| -> PyResult<()> {
+            let _mode = FlushGuard::new();
             let Core {
                 batch,
                 actions,
@@ -354,9 +405,21 @@ fn stepped<'py>(py: Python<'py>, core: &Core) -> PyResult<Bound<'py, PyDict>> {
     Ok(out)
 }
 
+/// Environment steps per second of `copies` copies of `task` stepped in turn by bare `mj_step`
+/// calls on this thread (the anchor of `dhrl bench env`).
+#[pyfunction]
+fn raw_mj_step_rate(py: Python<'_>, task: &str, copies: usize, env_steps: usize) -> PyResult<f64> {
+    let task = TaskName::from_str(task).map_err(value_error)?;
+    py.detach(|| {
+        let _mode = FlushGuard::new();
+        dhrl::bench::raw_mj_step_rate(task, copies, env_steps).map_err(value_error)
+    })
+}
+
 #[pymodule]
 fn _dhrl(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Batch>()?;
+    m.add_function(wrap_pyfunction!(raw_mj_step_rate, m)?)?;
     m.add(
         "TASKS",
         TaskName::ALL

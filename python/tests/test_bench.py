@@ -19,7 +19,7 @@ def test_bench_json_rows_hold_every_measured_cell(capsys):
         ("InvertedPendulum-v4", 3, 2),
     ]
     for row in rows:
-        for cell in ("dhrl_delay0", "dhrl_delayed", "gym_sync"):
+        for cell in ("raw", "dhrl_native_delayed", "dhrl_delay0", "dhrl_delayed", "gym_sync"):
             assert row[cell] > 0, (cell, row)
     assert rows[0]["gym_async"] > 0
     assert rows[1]["gym_async"] is None, "above --async-max AsyncVectorEnv is not run"

@@ -9,8 +9,10 @@
 //!
 //! The delayed policy is a belief network over Δ tokens, token `i` built from
 //! `(s_{t−Δ}, a_{t−Δ+i}, position i)`, through a small causal transformer (burn's
-//! `TransformerEncoder`: `belief_blocks` pre-LN blocks, `belief_heads` heads, width
-//! `belief_width`, GELU feed-forward of the same width, then a LayerNorm). Two heads read it: a
+//! `TransformerEncoder` holds the weights: `belief_blocks` pre-LN blocks, `belief_heads` heads,
+//! width `belief_width`, GELU feed-forward of the same width, then a LayerNorm; [`encode`] is
+//! its forward pass written out, with dropout masks drawn in bulk on the host instead of one
+//! generator call per entry, which was a sixth of an update's time). Two heads read it: a
 //! decoder reconstructing `s_{t−Δ+1+i}` at position `i` (trained every update, and the only loss
 //! that trains the transformer) and a Gaussian policy head (2×256 ReLU, as the reference) read at
 //! every position by the cloning loss — position `i` is cloned toward `π_ref(·|s_{t−Δ+1+i})` —
@@ -29,16 +31,15 @@
 use std::path::Path;
 
 use burn::module::Module;
+use burn::nn::attention::MultiHeadAttention;
 use burn::nn::attention::generate_autoregressive_mask;
-use burn::nn::transformer::{
-    TransformerEncoder, TransformerEncoderConfig, TransformerEncoderInput,
-};
-use burn::nn::{
-    Dropout, DropoutConfig, Embedding, EmbeddingConfig, LayerNorm, LayerNormConfig, Linear,
-    LinearConfig,
-};
+use burn::nn::transformer::{TransformerEncoder, TransformerEncoderConfig};
+use burn::nn::{Embedding, EmbeddingConfig, LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
+use burn::tensor::activation::softmax;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::sac::{
@@ -177,7 +178,6 @@ pub struct Belief {
     token: Linear,
     position: Embedding,
     input_norm: LayerNorm,
-    input_dropout: Dropout,
     encoder: TransformerEncoder,
     output_norm: LayerNorm,
     /// Token `i` → `ŝ_{t−Δ+1+i}`.
@@ -193,7 +193,6 @@ impl Belief {
             token: LinearConfig::new(2 * width, width).init(device),
             position: EmbeddingConfig::new(spec.delay, width).init(device),
             input_norm: LayerNormConfig::new(width).init(device),
-            input_dropout: DropoutConfig::new(config.dropout).init(),
             encoder: TransformerEncoderConfig::new(
                 width,
                 width,
@@ -209,35 +208,151 @@ impl Belief {
     }
 
     /// The tokens' features `[B, Δ, width]` for augmented states `[B, obs + Δ·act]`; position
-    /// `i` attends to positions `0..=i` only.
-    pub fn features(&self, augmented: Tensor<2>, spec: &AgentSpec) -> Tensor<3> {
+    /// `i` attends to positions `0..=i` only. `dropout` while the belief trains, `None` off the
+    /// graph.
+    pub fn features(
+        &self,
+        augmented: Tensor<2>,
+        spec: &AgentSpec,
+        mut dropout: Option<&mut DropoutMasks>,
+    ) -> Tensor<3> {
         let (obs, act, delay) = (spec.obs_dim, spec.act_dim, spec.delay);
         let rows = augmented.dims()[0];
         let state = augmented.clone().slice([0..rows, 0..obs]);
-        let actions: Tensor<3> = augmented
+        let actions = augmented
             .slice([0..rows, obs..obs + delay * act])
-            .reshape([rows, delay, act]);
-        let state: Tensor<3> = self.state_embedding.forward(state).unsqueeze_dim(1);
-        let width = state.dims()[2];
-        let tokens = self.token.forward(Tensor::cat(
-            vec![
-                state.expand([rows, delay, width]),
-                self.action_embedding.forward(actions),
-            ],
-            2,
-        )) + self.position.weight.val().unsqueeze_dim(0);
-        let tokens = self.input_dropout.forward(self.input_norm.forward(tokens));
+            .reshape([rows * delay, act]);
+        // token([embed(s); embed(a_i)]) with the token layer's weight split in its two halves:
+        // the state's half is the same for every position, so it is multiplied once per row.
+        let weight = self.token.weight.val();
+        let width = weight.dims()[1];
+        let from_state = self
+            .state_embedding
+            .forward(state)
+            .matmul(weight.clone().slice([0..width, 0..width]));
+        let from_actions = self
+            .action_embedding
+            .forward(actions)
+            .matmul(weight.slice([width..2 * width, 0..width]))
+            .reshape([rows, delay, width]);
+        let mut tokens = from_actions
+            + from_state.unsqueeze_dim(1)
+            + self.position.weight.val().unsqueeze_dim(0);
+        if let Some(bias) = &self.token.bias {
+            tokens = tokens + bias.val().unsqueeze_dims(&[0, 1]);
+        }
+        let tokens = self.input_norm.forward(tokens);
+        let tokens = match dropout.as_deref_mut() {
+            Some(masks) => masks.apply(tokens),
+            None => tokens,
+        };
         let causal = generate_autoregressive_mask(rows, delay, &tokens.device());
-        let features = self
-            .encoder
-            .forward(TransformerEncoderInput::new(tokens).mask_attn(causal));
-        self.output_norm.forward(features)
+        self.output_norm
+            .forward(encode(&self.encoder, tokens, causal, dropout))
     }
 
     /// `ŝ_{t−Δ+1+i}` per position, `[B, Δ, obs]`.
     pub fn reconstruct(&self, features: Tensor<3>) -> Tensor<3> {
         self.decoder.forward(features)
     }
+}
+
+/// Dropout masks for one update, drawn from their own ChaCha8 stream in bulk: an entry is kept
+/// (and scaled by `1/(1 − p)`) with probability `1 − p`, as burn's `Dropout` does.
+pub struct DropoutMasks {
+    rng: ChaCha8Rng,
+    prob: f64,
+}
+
+impl DropoutMasks {
+    pub fn new(seed: u64, prob: f64) -> DropoutMasks {
+        DropoutMasks {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            prob,
+        }
+    }
+
+    /// `x` with a fresh mask applied.
+    pub fn apply<const D: usize>(&mut self, x: Tensor<D>) -> Tensor<D> {
+        if self.prob == 0.0 {
+            return x;
+        }
+        let shape = x.shape();
+        let mut bits = vec![0u32; shape.num_elements()];
+        self.rng.fill(&mut bits[..]);
+        let keep = 1.0 - self.prob;
+        let threshold = (keep * 4_294_967_296.0) as u64;
+        let scale = (1.0 / keep) as f32;
+        let mask: Vec<f32> = bits
+            .into_iter()
+            .map(|b| if u64::from(b) < threshold { scale } else { 0.0 })
+            .collect();
+        let mask = Tensor::from_data(TensorData::new(mask, shape), &x.device());
+        x * mask
+    }
+}
+
+/// The forward pass of burn's pre-LN `TransformerEncoder` (`norm_first`), its weights as they
+/// are: per block `x + drop(MHA(norm_2(x)))`, then `x + drop(FF(norm_1(x)))` with
+/// `FF = outer(drop(GELU(inner(·))))`; attention weights dropped after the softmax. Without
+/// `dropout` it computes what burn's encoder computes in evaluation mode (tested).
+pub fn encode(
+    encoder: &TransformerEncoder,
+    tokens: Tensor<3>,
+    causal: Tensor<3, Bool>,
+    mut dropout: Option<&mut DropoutMasks>,
+) -> Tensor<3> {
+    let mut drop = |x: Tensor<3>| match dropout.as_deref_mut() {
+        Some(masks) => masks.apply(x),
+        None => x,
+    };
+    let mut x = tokens;
+    for layer in &encoder.layers {
+        let attended = attention(
+            &layer.mha,
+            layer.norm_2.forward(x.clone()),
+            causal.clone(),
+            &mut drop,
+        );
+        x = x + drop(attended);
+        let ff = &layer.pwff;
+        let hidden = ff
+            .activation
+            .forward(ff.linear_inner.forward(layer.norm_1.forward(x.clone())));
+        let out = ff.linear_outer.forward(drop(hidden));
+        x = x + drop(out);
+    }
+    x
+}
+
+/// Scaled dot-product self-attention of `x` `[B, T, width]` under the causal mask, its
+/// weights through `drop` after the softmax, as burn's `MultiHeadAttention`.
+fn attention(
+    mha: &MultiHeadAttention,
+    x: Tensor<3>,
+    causal: Tensor<3, Bool>,
+    drop: &mut impl FnMut(Tensor<3>) -> Tensor<3>,
+) -> Tensor<3> {
+    let [rows, tokens, width] = x.dims();
+    let (heads, head_width) = (mha.n_heads, mha.d_k);
+    let split = |linear: &Linear| {
+        linear
+            .forward(x.clone())
+            .reshape([rows, tokens, heads, head_width])
+            .swap_dims(1, 2)
+    };
+    let (query, key, value) = (split(&mha.query), split(&mha.key), split(&mha.value));
+    let scores = query
+        .matmul(key.transpose())
+        .div_scalar((head_width as f32).sqrt())
+        .mask_fill(causal.reshape([rows, 1, tokens, tokens]), mha.min_float);
+    let weights = softmax(scores, 3).reshape([rows * heads, tokens, tokens]);
+    let weights = drop(weights).reshape([rows, heads, tokens, tokens]);
+    let context = weights
+        .matmul(value)
+        .swap_dims(1, 2)
+        .reshape([rows, tokens, width]);
+    mha.output.forward(context)
 }
 
 /// The belief's reconstruction loss: the squared error of every predicted intermediate state,
@@ -284,6 +399,8 @@ pub struct Vdpo {
     bc_updates: u64,
     belief_learning_rate: f64,
     bc_learning_rate: f64,
+    /// Dropout probability in the belief while it trains.
+    dropout: f64,
     /// The delay-free SAC on the true state.
     reference: SacLearner,
     belief: Belief,
@@ -317,6 +434,7 @@ impl Vdpo {
             bc_updates: config.bc_updates,
             belief_learning_rate: config.belief_learning_rate,
             bc_learning_rate: config.bc_learning_rate,
+            dropout: config.dropout,
             reference,
             belief,
             belief_opt: adam(&config.sac),
@@ -334,7 +452,7 @@ impl Vdpo {
     /// The policy head's input at the last position, `[B, width]`, off the graph.
     fn last_features(&self, augmented: Tensor<2>) -> Tensor<2> {
         let rows = augmented.dims()[0];
-        let features = self.belief.valid().features(augmented, &self.spec);
+        let features = self.belief.valid().features(augmented, &self.spec, None);
         let [_, delay, width] = features.dims();
         features
             .slice([0..rows, delay - 1..delay, 0..width])
@@ -365,18 +483,20 @@ impl Vdpo {
     }
 
     /// One step of the belief network on the reconstruction loss; returns the loss. Dropout
-    /// draws from burn's generator, seeded per update so that a resumed run draws the same.
+    /// masks draw from a stream seeded per update, so that a resumed run draws the same.
     fn update_belief(
         &mut self,
         augmented: Tensor<2>,
         truth: Tensor<3>,
         updates_before: u64,
     ) -> f64 {
-        self.devices.train.seed(seeds::named(
-            self.seed.wrapping_add(updates_before),
-            "vdpo/dropout",
-        ));
-        let features = self.belief.features(augmented, &self.spec);
+        let mut masks = DropoutMasks::new(
+            seeds::named(self.seed.wrapping_add(updates_before), "vdpo/dropout"),
+            self.dropout,
+        );
+        let features = self
+            .belief
+            .features(augmented, &self.spec, Some(&mut masks));
         let loss = reconstruction_loss(self.belief.reconstruct(features), truth);
         let value = f64::from(loss.clone().inner().into_scalar::<f32>());
         let grads = GradientsParams::from_grads(loss.backward(), &self.belief);
@@ -396,7 +516,7 @@ impl Vdpo {
         while steps < self.bc_updates {
             let batch = ctx.batch()?;
             let n = batch.len();
-            let features = belief.features(rows(batch.augmented, n, &plain), &self.spec);
+            let features = belief.features(rows(batch.augmented, n, &plain), &self.spec, None);
             let width = features.dims()[2];
             let features = features.reshape([n * delay, width]);
             let targets = matrix(batch.intermediate_states, n * delay, obs, &plain);
@@ -546,6 +666,7 @@ mod tests {
     use super::*;
     use crate::algos::random_batch;
     use crate::learn::{LearnDevice, assert_close as close};
+    use burn::nn::transformer::TransformerEncoderInput;
 
     #[test]
     fn gaussian_kl_matches_hand_values() {
@@ -563,6 +684,44 @@ mod tests {
             ),
         );
         close(&to_vec(kl), &[(2.0f32.ln() + 0.25 - 0.5) / 2.0]);
+    }
+
+    /// The written-out forward pass is burn's encoder in evaluation mode, weights as they are.
+    #[test]
+    fn encode_without_dropout_is_burns_encoder_in_evaluation() {
+        let device = Devices::new(LearnDevice::Cpu).unwrap().plain;
+        device.seed(5);
+        let encoder = TransformerEncoderConfig::new(8, 8, 2, 2)
+            .with_dropout(0.1)
+            .with_norm_first(true)
+            .init(&device);
+        let tokens = Tensor::<3>::random([3, 4, 8], burn::tensor::Distribution::Default, &device);
+        let causal = generate_autoregressive_mask(3, 4, &device);
+        let burns =
+            encoder.forward(TransformerEncoderInput::new(tokens.clone()).mask_attn(causal.clone()));
+        close(
+            &to_vec(encode(&encoder, tokens, causal, None)),
+            &to_vec(burns),
+        );
+    }
+
+    /// A mask keeps about 1 − p of the entries, scaled by 1/(1 − p), and repeats for a seed.
+    #[test]
+    fn dropout_masks_keep_one_minus_p_scaled_and_repeat_per_seed() {
+        let device = Devices::new(LearnDevice::Cpu).unwrap().plain;
+        let ones = Tensor::<2>::ones([100, 100], &device);
+        let mask = |seed| to_vec(DropoutMasks::new(seed, 0.1).apply(ones.clone()));
+        let first = mask(9);
+        assert_eq!(first, mask(9));
+        assert_ne!(first, mask(10));
+        // Binomial(10,000, 0.9): standard deviation 30.
+        let kept = first.iter().filter(|&&v| v != 0.0).count();
+        assert!((8800..=9200).contains(&kept), "{kept} kept");
+        assert!(
+            first
+                .iter()
+                .all(|&v| v == 0.0 || (v - 1.0 / 0.9).abs() < 1e-6)
+        );
     }
 
     #[test]

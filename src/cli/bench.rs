@@ -82,6 +82,9 @@ pub struct BenchEnvArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// Total delay Δ: above 0, the delayed batch of training is timed (delay layer on the CPU).
+    #[arg(long, default_value_t = 0)]
+    delay: usize,
     /// Batched steps to time.
     #[arg(long, default_value_t = 100)]
     steps: usize,
@@ -125,6 +128,7 @@ fn run_bench_update(args: &BenchUpdateArgs) -> anyhow::Result<()> {
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
+        println!("{}", report.machine);
         println!(
             "{} on {} sizes, delay {}, batch {}, {:?}, {} threads: {:.1} updates/s ({:.2} ms per update)",
             report.algo,
@@ -147,6 +151,7 @@ fn all_cores() -> usize {
 fn run_bench_delay(args: &BenchDelayArgs) -> anyhow::Result<()> {
     let threads = args.threads.unwrap_or_else(all_cores);
     if !args.json {
+        println!("{}", dhrl::bench::Machine::here());
         println!(
             "{:<14} {:>6} {:>5} {:>14} {:>14} {:>9} {:>14} {:>9}  gpu adapter",
             "task",
@@ -188,22 +193,36 @@ fn run_bench_delay(args: &BenchDelayArgs) -> anyhow::Result<()> {
 
 fn run_bench_env(args: &BenchEnvArgs) -> anyhow::Result<()> {
     let threads = args.threads.unwrap_or_else(all_cores);
-    let report = bench_env(args.task, args.envs, threads, args.steps, args.seed)?;
+    let report = bench_env(
+        args.task, args.envs, threads, args.delay, args.steps, args.seed,
+    )?;
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
+        println!("{}", report.machine);
         println!(
-            "{:<18} {:>6} {:>7} {:>16} {:>20} {:>7}",
-            "task", "envs", "threads", "env steps/s", "raw mj_step env/s", "ratio"
+            "{:<18} {:>6} {:>7} {:>5} {:>12} {:>16} {:>7} {:>20} {:>7}",
+            "task",
+            "envs",
+            "threads",
+            "delay",
+            "env steps/s",
+            "raw, 1 copy",
+            "ratio",
+            "raw, all copies",
+            "ratio"
         );
         println!(
-            "{:<18} {:>6} {:>7} {:>16.0} {:>20.0} {:>7.2}",
+            "{:<18} {:>6} {:>7} {:>5} {:>12.0} {:>16.0} {:>7.2} {:>20.0} {:>7.2}",
             report.task.as_str(),
             report.envs,
             report.threads,
+            report.delay,
             report.env_steps_per_sec,
             report.raw_env_steps_per_sec,
-            report.ratio
+            report.ratio,
+            report.raw_batch_env_steps_per_sec,
+            report.ratio_to_raw_batch
         );
     }
     Ok(())

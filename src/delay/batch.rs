@@ -111,15 +111,26 @@ impl DelayedBatch {
     /// Steps the simulator with `actions`, then the delay layer with what it returned.
     pub fn step(&mut self, actions: &[f32]) -> Result<(), BatchError> {
         self.env.step(actions)?;
-        self.layer.step(&StepInput::from_env(&self.env, actions))?;
-        Ok(())
+        self.step_layer(actions)
     }
 
     /// [`DelayedBatch::step`] with copy `i` doing what `controls[i]` says: held copies stay
     /// as they are (simulation and delay layer alike), restarted ones begin a new episode.
     pub fn step_each(&mut self, actions: &[f32], controls: &[CopyStep]) -> Result<(), BatchError> {
         self.env.step_each(actions, controls)?;
-        self.layer.step(&StepInput::from_env(&self.env, actions))?;
+        self.step_layer(actions)
+    }
+
+    /// The delay layer's step on the simulation's own threads, still awake from its step (the
+    /// CPU layer splits large batches across the current pool).
+    fn step_layer(&mut self, actions: &[f32]) -> Result<(), BatchError> {
+        let input = StepInput::from_env(&self.env, actions);
+        let layer = &mut self.layer;
+        if self.env.threads() > 1 {
+            self.env.install(|| layer.step(&input))?;
+        } else {
+            layer.step(&input)?;
+        }
         Ok(())
     }
 }

@@ -5,7 +5,7 @@ use super::layer::{DelayLayer, LayerState, LayerStateMut, read_state, write_stat
 use super::layout::{
     CopyCounters, DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED, RecordMeta,
 };
-use super::records::{RecordBatch, StepInput};
+use super::records::{RecordBatch, RecordRef, StepInput};
 use super::warmup::WarmupFiller;
 use super::{DelayConfig, DelayError};
 use crate::sim::CopyStep;
@@ -58,6 +58,23 @@ pub struct BatchExtras {
 }
 
 impl Transitions {
+    /// Empty, with room for `rows` transitions of `layout` (without optional fields).
+    pub fn with_capacity(layout: &DelayLayout, rows: usize) -> Transitions {
+        let (aug, obs, act) = (layout.augmented_dim(), layout.obs_dim, layout.act_dim);
+        Transitions {
+            copy: Vec::with_capacity(rows),
+            episode: Vec::with_capacity(rows),
+            tau: Vec::with_capacity(rows),
+            augmented: Vec::with_capacity(rows * aug),
+            state: Vec::with_capacity(rows * obs),
+            action: Vec::with_capacity(rows * act),
+            reward: Vec::with_capacity(rows),
+            next_augmented: Vec::with_capacity(rows * aug),
+            next_state: Vec::with_capacity(rows * obs),
+            terminated: Vec::with_capacity(rows),
+            intermediate_states: Vec::new(),
+        }
+    }
     pub fn len(&self) -> usize {
         self.copy.len()
     }
@@ -264,11 +281,10 @@ pub(super) fn transitions_from(
     records: &RecordBatch,
 ) -> Transitions {
     let (ring_len, stride) = (l.ring_len(), l.stride());
-    let mut out = Transitions::default();
-    for record in records.iter() {
-        if record.is_final_state() || (record.meta.tau as usize) < l.delay {
-            continue;
-        }
+    let delivered =
+        |record: &RecordRef<'_>| !record.is_final_state() && (record.meta.tau as usize) >= l.delay;
+    let mut out = Transitions::with_capacity(l, records.iter().filter(delivered).count());
+    for record in records.iter().filter(delivered) {
         let ring = &ring[record.copy * ring_len * stride..(record.copy + 1) * ring_len * stride];
         let slot = record.meta.slot as usize;
         let next = (slot + 1) % ring_len;

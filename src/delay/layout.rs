@@ -87,9 +87,12 @@ impl DelayLayout {
 
     /// [`DelayLayout::assemble_augmented`], appended to `out`.
     pub fn push_augmented<'r>(&self, row: impl Fn(usize) -> &'r [f32], out: &mut Vec<f32>) {
-        let start = out.len();
-        out.resize(start + self.augmented_dim(), 0.0);
-        self.assemble_augmented(row, &mut out[start..]);
+        let (obs, act) = (self.obs_dim, self.act_dim);
+        out.reserve(self.augmented_dim());
+        out.extend_from_slice(&row(0)[..obs]);
+        for k in 0..self.delay {
+            out.extend_from_slice(&row(k)[obs..obs + act]);
+        }
     }
     /// Steps kept per copy: transition τ completes at τ + 1 + Δ and needs `s_{τ-Δ}`; an episode
     /// end flushes τ down to T − Δ − 1, so `s_{T-2Δ-1} … s_T` (2Δ + 2 states) must survive the

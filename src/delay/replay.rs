@@ -249,7 +249,7 @@ impl ReplayStore {
         if total == 0 {
             return Err(ReplayError::Empty);
         }
-        let mut out = Transitions::default();
+        let mut out = Transitions::with_capacity(&self.layout, batch);
         let mut misses = 0usize;
         while out.len() < batch {
             // Uniform over stored steps, then rejection of the few that are not transitions

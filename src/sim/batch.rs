@@ -183,13 +183,12 @@ impl BatchedEnv {
         }
         let actuator_noise = actuator_noise(config.actuator_noise)?;
         let model = TaskModel::load(config.task)?;
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(config.threads)
-            .build()
-            .map_err(|e| SimError::ThreadPool {
+        let pool = crate::float_mode::thread_pool(config.threads, "dhrl-sim").map_err(|e| {
+            SimError::ThreadPool {
                 threads: config.threads,
                 message: e.to_string(),
-            })?;
+            }
+        })?;
         let (n, obs_dim) = (config.envs, model.task.obs_dim);
         let copies = (0..n)
             .map(|i| {
@@ -409,6 +408,17 @@ impl BatchedEnv {
     }
     pub fn threads(&self) -> usize {
         self.pool.current_num_threads()
+    }
+    /// Runs `f` on the copies' threads: parallel work that goes with a step (the delay layer)
+    /// uses them rather than another pool.
+    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        self.pool.install(f)
+    }
+    /// Per worker thread, whether it flushes subnormal floats ([`crate::float_mode`]): a
+    /// subnormal product computed there comes out as zero.
+    pub fn workers_flush_subnormals(&self) -> Vec<bool> {
+        self.pool
+            .broadcast(|_| crate::float_mode::subnormal_product_is_zero())
     }
     /// Lower and upper bounds of each action dimension.
     pub fn action_bounds(&self) -> (&[f64], &[f64]) {

@@ -103,16 +103,13 @@ struct Trainer {
 
 /// A pool of `threads` threads for the learners: burn's CPU backend splits the products of a
 /// single learner across rayon's threads, which costs more than it gains at these sizes, so an
-/// agent gets as many threads as it has learners to update side by side.
+/// agent gets as many threads as it has learners to update side by side. Its threads flush
+/// subnormals ([`crate::float_mode`]).
 pub fn learner_pool(threads: usize) -> Result<rayon::ThreadPool, TrainError> {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .thread_name(|i| format!("dhrl-learner-{i}"))
-        .build()
-        .map_err(|e| TrainError::Io {
-            path: "learner threads".into(),
-            message: e.to_string(),
-        })
+    crate::float_mode::thread_pool(threads, "dhrl-learner").map_err(|e| TrainError::Io {
+        path: "learner threads".into(),
+        message: e.to_string(),
+    })
 }
 
 /// Set when the process is asked to stop (SIGTERM, SIGINT, SIGUSR1 once
