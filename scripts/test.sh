@@ -6,7 +6,24 @@
 # DHRL_SKIP_GPU_TESTS=1 or DHRL_SKIP_SLURM_TESTS=1 to skip them knowingly (they say so).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
+# Every stage's wall time, printed as it ends and again in a table at the end.
+started=$SECONDS
+stage_start=$SECONDS
+stage_times=()
+stage_done() {
+    local seconds=$((SECONDS - stage_start))
+    stage_times+=("$(printf '%-32s %5d s' "$1" "$seconds")")
+    echo "test: stage '$1' took ${seconds} s" >&2
+    stage_start=$SECONDS
+}
+summary() {
+    echo "test: wall time per stage" >&2
+    printf '  %s\n' "${stage_times[@]}" >&2
+    printf '  %-32s %5d s\n' total $((SECONDS - started)) >&2
+}
+trap summary EXIT
 scripts/setup.sh
+stage_done "set-up (venv, MuJoCo)"
 packages=()
 if [[ "${DHRL_SKIP_GPU_TESTS:-}" != 1 ]] && ! ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1; then
     packages+=(mesa-vulkan-drivers libvulkan1)
@@ -23,6 +40,8 @@ if (( ${#packages[@]} )); then
         echo "test: missing ${packages[*]}: install them as root (Debian/Ubuntu), or set DHRL_SKIP_GPU_TESTS=1 / DHRL_SKIP_SLURM_TESTS=1" >&2
     fi
 fi
+stage_done "system packages"
+
 # The Slurm test starts its own one-node cluster as root; without Slurm it fails, unless skipped.
 if [[ "${DHRL_SKIP_SLURM_TESTS:-}" != 1 ]]; then
     export DHRL_REQUIRE_SLURM=1
@@ -32,11 +51,24 @@ fi
 if [[ "${DHRL_SKIP_GPU_TESTS:-}" != 1 ]]; then
     export DHRL_WGPU_SOFTWARE="${DHRL_WGPU_SOFTWARE:-vulkan}" DHRL_REQUIRE_WGPU_LEARNER=1
 fi
-cargo test --release --features wgpu-learner "$@"
+cargo test --release --features wgpu-learner --no-run "$@"
+stage_done "build (release, every test)"
+# One cargo invocation per test binary, so each one's wall time is printed.
+cargo test --release --features wgpu-learner --lib --bins "$@"
+stage_done "unit tests"
+for test in tests/*.rs; do
+    name=$(basename "$test" .rs)
+    cargo test --release --features wgpu-learner --test "$name" "$@"
+    stage_done "tests/$name.rs"
+done
+cargo test --release --features wgpu-learner --doc "$@"
+stage_done "doc tests"
 # The Python package (python/): its extension built from the same compiled tree (the same
 # features, so nothing is built twice), put beside its sources as `maturin develop` would,
 # and its pytest suite run in the venv against Gymnasium and the `dhrl` binary.
 PYO3_PYTHON="$PWD/.deps/venv/bin/python" cargo build --release --features wgpu-learner -p dhrl-python
 cp target/release/lib_dhrl.so python/dhrl/_dhrl.abi3.so
 .deps/venv/bin/python -m pip install --quiet --disable-pip-version-check pytest
+stage_done "Python extension"
 PYTHONPATH="$PWD/python" .deps/venv/bin/python -m pytest -q python/tests
+stage_done "Python tests (pytest)"

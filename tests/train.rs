@@ -701,6 +701,83 @@ fn train_arguments_resolve_in_order_and_resume_takes_only_steps() {
     );
 }
 
+/// Every flag of `dhrl train` that sets a run's configuration is refused beside `--resume`,
+/// by name (none is silently ignored); clap's own list of the arguments drives the test, so a
+/// new flag without a sample value here fails it. A `--steps` below the run's own is refused
+/// too: a resumed run can only be extended.
+#[test]
+fn resume_refuses_every_other_setting_by_name_and_never_shortens_a_run() {
+    use clap::{Args, Command, FromArgMatches};
+    use dhrl::train::{Start, TrainArgs, TrainConfig, train};
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("c.toml");
+    std::fs::write(&file, "seed = 7\n").unwrap();
+    let sample = |flag: &str| -> Option<&str> {
+        Some(match flag {
+            "task" => "ant",
+            "algo" => "bpql",
+            "set" => "tau=0.01",
+            "delay" | "action-delay" | "max-delay" => "2",
+            "actuator-noise" => "0.1",
+            "warmup" => "random",
+            "seed" | "envs" | "threads" | "eval-episodes" => "3",
+            "warmup-steps" | "eval-every" | "checkpoint-every" | "batch-size" => "64",
+            "alpha" | "lifting-weight" => "0.5",
+            "lifting-samples" => "4",
+            "device" | "delay-device" => "cpu",
+            "config" => file.to_str().unwrap(),
+            _ => return None,
+        })
+    };
+    let command = TrainArgs::augment_args(Command::new("train").no_binary_name(true));
+    let mut checked = 0;
+    for arg in command.get_arguments() {
+        let flag = arg.get_long().expect("every train argument is a long flag");
+        if ["resume", "steps", "out", "help-config"].contains(&flag) {
+            continue;
+        }
+        let mut line = vec![
+            "--resume".to_string(),
+            "somewhere".into(),
+            format!("--{flag}"),
+        ];
+        if arg.get_action().takes_values() {
+            let value =
+                sample(flag).unwrap_or_else(|| panic!("--{flag}: add a sample value to this test"));
+            line.push(value.into());
+        }
+        let matches = command.clone().try_get_matches_from(&line).unwrap();
+        let args = TrainArgs::from_arg_matches(&matches).unwrap();
+        let error = args.plan().unwrap_err().to_string();
+        assert!(
+            error.contains(&format!("--{flag}")) && error.contains("--resume"),
+            "--{flag}: {error}"
+        );
+        checked += 1;
+    }
+    assert!(checked >= 20, "{checked} flags checked");
+
+    // A run of 1,000 steps: --steps 500 is refused, before anything is loaded.
+    let run = dir.path().join("run");
+    std::fs::create_dir(&run).unwrap();
+    let saved = TrainConfig {
+        steps: 1000,
+        ..TrainConfig::default()
+    };
+    std::fs::write(run.join("config.toml"), toml::to_string(&saved).unwrap()).unwrap();
+    let shorter = TrainConfig {
+        steps: 500,
+        ..TrainConfig::default()
+    };
+    let error = train(&shorter, &run, Start::Resume, false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("--steps") && error.contains("500") && error.contains("1000"),
+        "{error}"
+    );
+}
+
 /// A loss that stops being finite stops the run with an error naming the update, the step and
 /// the statistic, and the last checkpoint (before the first update here) is kept to resume.
 #[test]

@@ -686,6 +686,111 @@ mod tests {
         close(&to_vec(kl), &[(2.0f32.ln() + 0.25 - 0.5) / 2.0]);
     }
 
+    fn small_agent(bc_updates: u64) -> (Vdpo, AgentSpec) {
+        let devices = Devices::new(LearnDevice::Cpu).unwrap();
+        let spec = AgentSpec {
+            obs_dim: 3,
+            act_dim: 2,
+            delay: 4,
+            action_low: vec![-1.0; 2],
+            action_high: vec![1.0; 2],
+        };
+        let config = Config {
+            belief_width: 8,
+            belief_blocks: 2,
+            belief_heads: 2,
+            bc_every: 10,
+            bc_updates,
+            ..Config::default()
+        };
+        (Vdpo::new(&config, &spec, &devices, 4), spec)
+    }
+
+    /// Two augmented states that differ only in their last action `a_{t−1}`.
+    fn differing_in_the_last_action(spec: &AgentSpec) -> (Vec<f32>, Vec<f32>) {
+        let x = random_batch(spec, 2, 6).augmented;
+        let mut changed = x.clone();
+        let aug = spec.augmented_dim();
+        for row in changed.chunks_mut(aug) {
+            for a in &mut row[aug - spec.act_dim..] {
+                *a = -*a + 0.5;
+            }
+        }
+        (x, changed)
+    }
+
+    /// The causal mask: the features at positions before the last do not see the last action;
+    /// the last position does.
+    #[test]
+    fn a_position_sees_no_later_action() {
+        let (agent, spec) = small_agent(1);
+        let (x, changed) = differing_in_the_last_action(&spec);
+        let features = |x: Vec<f32>| {
+            let input = matrix(x, 2, spec.augmented_dim(), &agent.devices.plain);
+            to_vec(agent.belief.valid().features(input, &spec, None))
+        };
+        let (a, b) = (features(x), features(changed));
+        let per_position = 8;
+        for (k, (p, q)) in a.iter().zip(&b).enumerate() {
+            let position = (k / per_position) % spec.delay;
+            if position + 1 < spec.delay {
+                assert!(
+                    (p - q).abs() < 1e-6,
+                    "position {position} saw a later action"
+                );
+            }
+        }
+        let last_moved = a.iter().zip(&b).enumerate().any(|(k, (p, q))| {
+            (k / per_position) % spec.delay == spec.delay - 1 && (p - q).abs() > 1e-4
+        });
+        assert!(last_moved, "the last position does not see a_(t-1)");
+    }
+
+    /// The delayed policy acts from the last position, the only one that has seen every action.
+    #[test]
+    fn the_policy_acts_from_the_last_position() {
+        let (mut agent, spec) = small_agent(1);
+        let (x, changed) = differing_in_the_last_action(&spec);
+        let a = agent.act(&x, 2, ActMode::Deterministic);
+        let b = agent.act(&changed, 2, ActMode::Deterministic);
+        assert!(
+            a.iter().zip(&b).any(|(p, q)| (p - q).abs() > 1e-5),
+            "{a:?} {b:?}: the action ignores a_(t-1)"
+        );
+    }
+
+    /// The cloning loss is KL(π_Δ(·|x) ‖ π_ref(·|s)), the delayed policy first.
+    #[test]
+    fn the_cloning_loss_is_kl_of_the_delayed_policy_from_the_reference() {
+        let (mut agent, spec) = small_agent(1);
+        let batch = random_batch(&spec, 4, 2);
+        let plain = agent.devices.plain.clone();
+        let n = batch.len();
+        let features = agent
+            .belief
+            .valid()
+            .features(rows(batch.augmented.clone(), n, &plain), &spec, None)
+            .reshape([n * spec.delay, 8]);
+        let targets = matrix(
+            batch.intermediate_states.clone(),
+            n * spec.delay,
+            spec.obs_dim,
+            &plain,
+        );
+        let (head, reference) = (
+            agent.policy_head.valid().distribution(features),
+            agent.reference.actor.valid().distribution(targets),
+        );
+        let forward = to_vec(gaussian_kl(head.clone(), reference.clone()))[0];
+        let backward = to_vec(gaussian_kl(reference, head))[0];
+        assert!((forward - backward).abs() > 1e-3, "{forward} {backward}");
+        let (kl, steps) = agent
+            .clone_reference(&mut UpdateContext::fixed(&batch, 0, 0))
+            .unwrap();
+        assert_eq!(steps, 1);
+        assert!((kl as f32 - forward).abs() < 1e-5, "{kl} against {forward}");
+    }
+
     /// The written-out forward pass is burn's encoder in evaluation mode, weights as they are.
     #[test]
     fn encode_without_dropout_is_burns_encoder_in_evaluation() {

@@ -1,6 +1,7 @@
 //! `dhrl train`'s arguments, and how they resolve into a run: defaults, then `--config`, then
 //! flags (`--set FIELD=VALUE` for any field of the algorithm); `--resume` takes the run's own
-//! `config.toml` and only `--steps`.
+//! `config.toml` and only `--steps` (to extend it); any other setting beside it is refused,
+//! by name.
 use std::path::PathBuf;
 
 use clap::Args;
@@ -133,21 +134,50 @@ impl TrainArgs {
         Ok(c)
     }
 
+    /// The flags given that set a run's configuration, `--steps` aside: what `--resume` refuses.
+    pub fn settings_given(&self) -> Vec<&'static str> {
+        let d = &self.delay;
+        [
+            ("--task", self.task.is_some()),
+            ("--algo", self.algo.is_some()),
+            ("--set", !self.set.is_empty()),
+            ("--delay", d.delay.is_some()),
+            ("--action-delay", d.action_delay.is_some()),
+            ("--random-delay", d.random_delay),
+            ("--max-delay", d.max_delay.is_some()),
+            ("--actuator-noise", d.actuator_noise.is_some()),
+            ("--warmup", d.warmup.is_some()),
+            ("--seed", self.seed.is_some()),
+            ("--envs", self.envs.is_some()),
+            ("--threads", self.threads.is_some()),
+            ("--warmup-steps", self.warmup_steps.is_some()),
+            ("--eval-every", self.eval_every.is_some()),
+            ("--eval-episodes", self.eval_episodes.is_some()),
+            ("--checkpoint-every", self.checkpoint_every.is_some()),
+            ("--batch-size", self.batch_size.is_some()),
+            ("--alpha", self.alpha.is_some()),
+            ("--fixed-alpha", self.fixed_alpha),
+            ("--lifting-weight", self.lifting_weight.is_some()),
+            ("--lifting-samples", self.lifting_samples.is_some()),
+            ("--device", self.device.is_some()),
+            ("--delay-device", self.delay_device.is_some()),
+            ("--config", self.config.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(flag, given)| given.then_some(flag))
+        .collect()
+    }
+
     /// Where and how to train: a new run (checked, in `--out` or a fresh folder under
     /// `runs/`), or `--resume DIR` with at most `--steps` beside it.
     pub fn plan(&self) -> Result<TrainPlan, TrainError> {
         if let Some(dir) = &self.resume {
-            let given = self.task.is_some()
-                || self.algo.is_some()
-                || !self.set.is_empty()
-                || self.delay.any()
-                || self.config.is_some()
-                || self.seed.is_some();
-            if given {
+            let given = self.settings_given();
+            if !given.is_empty() {
                 return Err(ConfigError::Invalid {
                     what: "--resume",
                     accepted: "given alone or with --steps (the run continues with its own config.toml)",
-                    value: format!("given with other options for {}", dir.display()),
+                    value: format!("given with {} for {}", given.join(", "), dir.display()),
                 }
                 .into());
             }

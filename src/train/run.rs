@@ -170,6 +170,14 @@ pub fn train(
         }
         Start::Resume => {
             let saved = TrainConfig::from_toml_file(&run.join("config.toml"))?;
+            // 0: no --steps given.
+            if config.steps != 0 && config.steps < saved.steps {
+                return Err(TrainError::Config(ConfigError::Invalid {
+                    what: "--steps with --resume",
+                    accepted: "at least the run's own steps (a resumed run can only be extended)",
+                    value: format!("{} (the run has {})", config.steps, saved.steps),
+                }));
+            }
             let merged = TrainConfig {
                 steps: config.steps.max(saved.steps),
                 ..saved
