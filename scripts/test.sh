@@ -46,6 +46,10 @@ stage_done "system packages"
 if [[ "${DHRL_SKIP_SLURM_TESTS:-}" != 1 ]]; then
     export DHRL_REQUIRE_SLURM=1
 fi
+# As root (CI), the full-disk test mounts a small tmpfs: a failed mount fails it, not skips it.
+if [[ "$(id -u)" == 0 ]]; then
+    export DHRL_REQUIRE_TMPFS=1
+fi
 # Everything is built once, with burn's wgpu learner: tests/wgpu_learner.rs checks it against
 # the CPU learner on a real GPU, or on Mesa's software Vulkan (lavapipe) where there is none.
 if [[ "${DHRL_SKIP_GPU_TESTS:-}" != 1 ]]; then

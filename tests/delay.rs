@@ -886,9 +886,9 @@ fn a_diverged_copy_ends_its_episode_and_its_last_step_stays_out_of_the_replay() 
         }
         assert_eq!(env.diverged()[1], 0, "the other copy is stable");
         assert_eq!(env.truncated()[1], 0);
-        flagged
-            .push(delayed.layer().records(), env.diverged())
-            .unwrap();
+        // Training's own hand-off (the loop calls push_step), beside one without the flags.
+        let diverged = flagged.push_step(&delayed).unwrap();
+        assert_eq!(diverged, u64::from(diverged_at == Some(step)));
         unflagged.push(delayed.layer().records(), &[]).unwrap();
     }
     assert_eq!(

@@ -313,6 +313,16 @@ fn a_run_stopped_by_sigterm_checkpoints_and_resumes_to_the_same_result() {
         .spawn()
         .unwrap();
     wait_for_a_checkpoint(&sweep, std::slice::from_ref(run));
+    // And for a first train.csv row (step 300 of 600), so that there is a log to keep.
+    let log = sweep.run_dir(run).join("train.csv");
+    let start = Instant::now();
+    while std::fs::read_to_string(&log).map_or(0, |t| t.lines().count()) < 2 {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no train.csv row within 2 min"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
     Command::new("kill")
         .args(["-TERM", &child.id().to_string()])
         .status()
@@ -328,9 +338,30 @@ fn a_run_stopped_by_sigterm_checkpoints_and_resumes_to_the_same_result() {
         panic!("{:?}", sweep.state(run));
     };
     assert!(env_steps < run.config.steps, "stopped at {env_steps}");
+    // The rows logged before the stop, wall seconds included: a run that continues keeps them
+    // byte for byte; one started over (the same numbers, other timings) would not.
+    let run_dir = sweep.run_dir(run);
+    let before = std::fs::read_to_string(run_dir.join("train.csv")).unwrap();
+    assert!(
+        before.lines().count() > 1,
+        "no train.csv row before the stop"
+    );
     ok(&dhrl(&["sweep", "run-one", &folder, "--index", "1"]));
+    assert!(
+        !run_dir.with_extension("without-checkpoint").exists(),
+        "the run was moved aside and started over instead of resuming"
+    );
+    let after = std::fs::read_to_string(run_dir.join("train.csv")).unwrap();
+    assert!(
+        after.starts_with(&before),
+        "the rows before the stop changed:\n{before}\n---\n{after}"
+    );
+    assert!(
+        after.len() > before.len(),
+        "nothing was trained after the stop"
+    );
     let whole = train_in_one_go(dir.path(), run);
-    assert_same_logs(&sweep.run_dir(run), &whole);
+    assert_same_logs(&run_dir, &whole);
 }
 
 #[test]

@@ -166,6 +166,58 @@ def test_reset_mask_restarts_only_the_selected_copies():
         env.reset(seed=1, options={"reset_mask": mask})
 
 
+def test_copies_kept_by_a_reset_mask_go_on_as_if_nothing_happened():
+    """The copies a partial reset keeps are held, not stepped: stepped on, they match a twin
+    that was never reset, observation, reward and true state alike."""
+    env = dhrl.make_vec("half-cheetah", 5, delay=1, seed=4)
+    twin = dhrl.make_vec("half-cheetah", 5, delay=1, seed=4)
+    rng = np.random.default_rng(0)
+    env.reset()
+    twin.reset()
+    for _ in range(10):
+        a = random_actions(env, rng)
+        env.step(a)
+        twin.step(a)
+    keep = np.array([False, True, False, True, True])
+    env.reset(options={"reset_mask": ~keep})
+    for _ in range(3):
+        a = random_actions(env, rng)
+        o1, r1, _, _, i1 = env.step(a)
+        o2, r2, _, _, i2 = twin.step(a)
+        np.testing.assert_array_equal(o1[keep], o2[keep])
+        np.testing.assert_array_equal(r1[keep], r2[keep])
+        np.testing.assert_array_equal(i1["state"][keep], i2["state"][keep])
+        assert not np.array_equal(i1["state"][~keep], i2["state"][~keep])
+
+
+@pytest.mark.parametrize("mode", ["next_step", "same_step"])
+@pytest.mark.parametrize("delay", [0, 2])
+def test_every_step_of_an_episode_is_one_call_and_the_show_step_is_no_step(mode, delay):
+    """Counting the calls in which a copy lives gives its episode length: next-step's extra
+    call after an end only shows the new episode (held, reward 0); same-step has none, the
+    first action of a new episode is applied on the call after the end."""
+    env = dhrl.make_vec("hopper", 4, delay=delay, autoreset_mode=mode, seed=5)
+    rng = np.random.default_rng(1)
+    env.reset()
+    lived = np.zeros(4, int)
+    ended = np.zeros(4, bool)
+    episodes = 0
+    for _ in range(300):
+        obs, reward, term, trunc, info = env.step(random_actions(env, rng))
+        done = term | trunc
+        if mode == "next_step":
+            assert (reward[ended] == 0).all() and not done[ended].any()
+            lived[~ended] += 1
+        else:
+            lived += 1
+        if done.any():
+            np.testing.assert_array_equal(lived[done], info["episode"]["l"][done])
+            lived[done] = 0
+            episodes += int(done.sum())
+        ended = done
+    assert episodes >= 8, episodes
+
+
 def test_disabled_autoreset_waits_for_a_reset_mask():
     env = dhrl.make_vec("inverted-pendulum", 3, autoreset_mode="disabled")
     env.reset(seed=0)

@@ -458,6 +458,22 @@ mod tests {
         close(&rollout, &[3.5, 3.25, 5.875]);
     }
 
+    /// The agent acts on `f^Δ(x)`, the state its model predicts for now: on the linear system,
+    /// `x = (1; 1, −1, 0.5)` at Δ = 3 acts as the policy does at 5.875, not at `f^1` (3.5) or
+    /// at the observation itself (1).
+    #[test]
+    fn the_agent_acts_on_the_state_rolled_delta_steps_forward() {
+        let devices = Devices::new(LearnDevice::Cpu).unwrap();
+        let mut agent = DelayedSac::new(&Config::default(), &spec(3), &devices, 0);
+        agent.model = linear_model(&devices.plain);
+        let acted = agent.act(&[1.0, 1.0, -1.0, 0.5], 1, ActMode::Deterministic);
+        let policy_at =
+            |s: f32| to_vec(agent.learner.exploit(matrix(vec![s], 1, 1, &devices.plain)));
+        assert_eq!(acted, policy_at(5.875));
+        assert_ne!(acted, policy_at(3.5));
+        assert_ne!(acted, policy_at(1.0));
+    }
+
     #[test]
     fn normalised_inputs_use_the_moments_of_every_batch_seen() {
         let device = Devices::new(LearnDevice::Cpu).unwrap().plain;

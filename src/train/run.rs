@@ -463,9 +463,7 @@ impl Trainer {
         while self.state.env_steps < c.steps {
             let actions = self.choose_actions()?;
             self.batch.step(&actions)?;
-            let diverged = self.batch.env().diverged();
-            self.replay.push(self.batch.layer().records(), diverged)?;
-            let count = diverged.iter().filter(|&&d| d != 0).count() as u64;
+            let count = self.replay.push_step(&self.batch)?;
             if count > 0 {
                 self.state.diverged_episodes += count;
                 bar.suspend(|| {
