@@ -759,11 +759,20 @@ mod tests {
         );
     }
 
-    /// The cloning loss is KL(π_Δ(·|x) ‖ π_ref(·|s)), the delayed policy first.
+    /// The cloning loss is KL(π_Δ(·|x) ‖ π_ref(·|s)), the delayed policy first: the stage's
+    /// logged KL is that direction computed here, far closer to it than to the other one.
+    /// (The networks' initial weights come from burn's process-wide generator, which tests in
+    /// other threads draw from too, so the values vary between runs; the relations do not.)
     #[test]
     fn the_cloning_loss_is_kl_of_the_delayed_policy_from_the_reference() {
         let (mut agent, spec) = small_agent(1);
-        let batch = random_batch(&spec, 4, 2);
+        let mut batch = random_batch(&spec, 4, 2);
+        // States far apart, so that the reference's Gaussians differ from the head's and the
+        // two directions of the KL from each other.
+        batch
+            .intermediate_states
+            .iter_mut()
+            .for_each(|s| *s *= 20.0);
         let plain = agent.devices.plain.clone();
         let n = batch.len();
         let features = agent
@@ -781,14 +790,18 @@ mod tests {
             agent.policy_head.valid().distribution(features),
             agent.reference.actor.valid().distribution(targets),
         );
-        let forward = to_vec(gaussian_kl(head.clone(), reference.clone()))[0];
-        let backward = to_vec(gaussian_kl(reference, head))[0];
-        assert!((forward - backward).abs() > 1e-3, "{forward} {backward}");
+        let forward = f64::from(to_vec(gaussian_kl(head.clone(), reference.clone()))[0]);
+        let backward = f64::from(to_vec(gaussian_kl(reference, head))[0]);
+        let gap = (forward - backward).abs();
+        assert!(gap > 1e-4 * forward.abs(), "{forward} {backward}");
         let (kl, steps) = agent
             .clone_reference(&mut UpdateContext::fixed(&batch, 0, 0))
             .unwrap();
         assert_eq!(steps, 1);
-        assert!((kl as f32 - forward).abs() < 1e-5, "{kl} against {forward}");
+        assert!(
+            (kl - forward).abs() < gap / 100.0,
+            "{kl}: KL(head ‖ reference) {forward}, KL(reference ‖ head) {backward}"
+        );
     }
 
     /// The written-out forward pass is burn's encoder in evaluation mode, weights as they are.
