@@ -12,14 +12,14 @@ stage_start=$SECONDS
 stage_times=()
 stage_done() {
     local seconds=$((SECONDS - stage_start))
-    stage_times+=("$(printf '%-32s %5d s' "$1" "$seconds")")
+    stage_times+=("$(printf '%-40s %5d s' "$1" "$seconds")")
     echo "test: stage '$1' took ${seconds} s" >&2
     stage_start=$SECONDS
 }
 summary() {
     echo "test: wall time per stage" >&2
     printf '  %s\n' "${stage_times[@]}" >&2
-    printf '  %-32s %5d s\n' total $((SECONDS - started)) >&2
+    printf '  %-40s %5d s\n' total $((SECONDS - started)) >&2
 }
 trap summary EXIT
 scripts/setup.sh
@@ -72,7 +72,9 @@ stage_done "doc tests"
 # and its pytest suite run in the venv against Gymnasium and the `dhrl` binary.
 PYO3_PYTHON="$PWD/.deps/venv/bin/python" cargo build --release --features wgpu-learner -p dhrl-python
 cp target/release/lib_dhrl.so python/dhrl/_dhrl.abi3.so
-.deps/venv/bin/python -m pip install --quiet --disable-pip-version-check pytest
-stage_done "Python extension"
+# pytest, and MuJoCo Warp: python/tests/test_mjwarp.py checks dhrl's physics against it (on
+# Warp's CPU device; its kernels compile once, then Warp caches them).
+.deps/venv/bin/python -m pip install --quiet --disable-pip-version-check pytest mujoco-warp==3.17.0
+stage_done "Python extension, pytest, MuJoCo Warp"
 PYTHONPATH="$PWD/python" .deps/venv/bin/python -m pytest -q python/tests
 stage_done "Python tests (pytest)"

@@ -6,6 +6,8 @@ Usage (from the repository root):
     PYTHONPATH=python .deps/venv/bin/python scripts/validate_mjwarp.py \\
         [--tasks all|ant,half-cheetah,...] [--states 16] [--rollout-steps 1000] [--worlds 8] \\
         [--device cpu|cuda] [--seed 0] [--json] [--out FILE.md]
+        [--heavy-rollout-steps T'] [--no-cone-check] [--skip-rollout] [--kernel-cache-dir DIR]
+        [--nconmax N] [--njmax N]
 
 dhrl steps the Gymnasium v4 tasks (SPEC.md §2) with libmujoco 3.17.0 in float64; MJWarp
 re-implements MuJoCo's pipeline as Warp kernels in float32, here on Warp's CPU device (or a
@@ -26,6 +28,18 @@ CUDA device). Two checks per task:
    and the qvel part of the observation (Hopper/Walker2d clip qvel to ±10, as their
    observations do), by the normwise relative error ‖dhrl − mjw‖∞ / max(‖mjw‖∞, 1), max and
    median over the K states.
+
+   Contact-frame diagnostic (on by default; ``--no-cone-check`` skips it): for models with
+   frictional contacts and pyramidal friction cones (all but InvertedPendulum), host MuJoCo C
+   and MJWarp step the same states twice more, once with the model's pyramidal cones and once
+   with both switched to elliptic cones. A pyramid's four edges follow the contact frame's
+   tangent axes, an elliptic cone is isotropic: where only the pyramidal run disagrees, the two
+   implementations orient the contact frame differently. That is what Ant shows: MJWarp 3.17
+   aligns a plane–capsule contact's first tangent with the capsule axis only when the axis'
+   projection onto the plane has norm ≥ 0.5 and uses world y otherwise, MuJoCo C always uses the
+   projection, so a steep leg touching the floor gets a rotated friction pyramid (a modelling
+   difference, not float32 rounding; planar models are unaffected because their frames differ
+   by a quarter turn, which maps a four-edge pyramid onto itself).
 
 2. **Rollout statistics.** W copies × T steps of uniform random actions, resetting on
    termination and at 1000 steps: dhrl through ``dhrl.make_vec(task, W, delay=0, seed=…)``;
@@ -319,11 +333,112 @@ def summary(errors: np.ndarray) -> dict[str, float]:
     return {"max": float(np.max(errors)), "median": float(np.median(errors))}
 
 
-def one_step_errors(task: str, states: int = 16, device: str = "cpu", seed: int = 0,
+def host_one_step(spec: TaskSpec, mjm, qpos, qvel, actions):
+    """One env step per state with host ``mujoco.mj_step`` (float64), each from a fresh
+    ``mj_resetData`` + state + ``mj_forward``. Returns qpos, qvel after the step, the
+    ``qacc_warmstart`` each step started from, and the progress before and after."""
+    import mujoco
+
+    data = mujoco.MjData(mjm)
+    n = len(qpos)
+    out_qpos, out_qvel, warmstart = np.empty_like(qpos), np.empty_like(qvel), np.empty_like(qvel)
+    before, after = np.empty(n), np.empty(n)
+    for i in range(n):
+        mujoco.mj_resetData(mjm, data)
+        data.qpos[:], data.qvel[:] = qpos[i], qvel[i]
+        mujoco.mj_forward(mjm, data)
+        warmstart[i] = data.qacc_warmstart
+        before[i] = progress_of(spec, mjm, data.qpos[None], data.xpos[None], data.xipos[None])[0]
+        data.ctrl[:] = actions[i].astype(np.float64)
+        for _ in range(spec.frame_skip):
+            mujoco.mj_step(mjm, data)
+        out_qpos[i], out_qvel[i] = data.qpos, data.qvel
+        after[i] = progress_of(spec, mjm, data.qpos[None], data.xpos[None], data.xipos[None])[0]
+    return out_qpos, out_qvel, warmstart, before, after
+
+
+def mjwarp_one_step(spec: TaskSpec, mjm, qpos, qvel, actions, warmstart, device: str,
                     nconmax: int | None = None, njmax: int | None = None) -> dict[str, Any]:
+    """One env step of every state at once, one MJWarp world each (raises NotSupported)."""
+    import mujoco
+
+    wp, mjw = import_warp()
+    data = mujoco.MjData(mjm)
+    with wp.ScopedDevice(device):
+        model = put_model(mjw, mjm)
+        data.qpos[:], data.qvel[:] = qpos[0], qvel[0]
+        mujoco.mj_forward(mjm, data)
+        d = mjw.put_data(mjm, data, nworld=len(qpos), nconmax=nconmax, njmax=njmax)
+        d.qpos.assign(qpos.astype(np.float32))
+        d.qvel.assign(qvel.astype(np.float32))
+        d.ctrl.assign(actions.astype(np.float32))
+        d.qacc_warmstart.assign(warmstart.astype(np.float32))
+        started = time.perf_counter()
+        mjw.step(model, d)
+        wp.synchronize()
+        first_s = time.perf_counter() - started
+        started = time.perf_counter()
+        for _ in range(spec.frame_skip - 1):
+            mjw.step(model, d)
+        wp.synchronize()
+        rest_s = time.perf_counter() - started
+        qpos_w = d.qpos.numpy().astype(np.float64)
+        return {
+            "qpos": qpos_w,
+            "qvel": d.qvel.numpy().astype(np.float64),
+            "progress": progress_of(
+                spec, mjm, qpos_w,
+                d.xpos.numpy() if spec.progress.startswith("body-x") else None,
+                d.xipos.numpy() if spec.progress == "com-x" else None,
+            ),
+            "overflow": int(np.bitwise_or.reduce(d.overflow.numpy())),
+            "first_s": first_s,
+            "step_ms": 1e3 * rest_s / max(spec.frame_skip - 1, 1),
+        }
+
+
+def cone_check(spec: TaskSpec, qpos, qvel, actions, device: str,
+               nconmax: int | None = None, njmax: int | None = None) -> dict[str, Any]:
+    """Host MuJoCo C (float64) vs MJWarp on the same states and controls, with the model's
+    pyramidal friction cones and again with elliptic ones. A pyramid's edges depend on the
+    contact frame's tangent axes, an elliptic cone does not: where only the pyramidal run
+    disagrees, the two implementations orient contact frames differently (MJWarp 3.17 aligns a
+    plane–capsule contact's first tangent with the capsule axis only when the axis' projection
+    onto the plane has norm ≥ 0.5, and uses world y otherwise; MuJoCo C always uses the
+    projection). Returns the max normwise relative error over both parts, per cone, and the
+    states that disagree by more than 1e-4 under each."""
+    import mujoco
+
+    out: dict[str, Any] = {}
+    for cone in (mujoco.mjtCone.mjCONE_PYRAMIDAL, mujoco.mjtCone.mjCONE_ELLIPTIC):
+        mjm = load_model(spec)
+        mjm.opt.cone = cone
+        hq, hv, warm, _, _ = host_one_step(spec, mjm, qpos, qvel, actions)
+        w = mjwarp_one_step(spec, mjm, qpos, qvel, actions, warm, device, nconmax, njmax)
+        a_q, a_v = observed(spec, hq, hv)
+        b_q, b_v = observed(spec, w["qpos"], w["qvel"])
+        err = normwise(b_q, b_v, a_q, a_v)
+        worst = np.maximum(err["qpos"], err["qvel"])
+        name = "pyramidal" if cone == mujoco.mjtCone.mjCONE_PYRAMIDAL else "elliptic"
+        out[name] = {"max": float(worst.max()), "states_over_1e-4": np.flatnonzero(worst > 1e-4).tolist()}
+    return out
+
+
+def has_pyramidal_friction(mjm) -> bool:
+    """Whether the model can make frictional contacts (condim ≥ 3) with pyramidal cones."""
+    import mujoco
+
+    can_touch = ((mjm.geom_contype[:, None] & mjm.geom_conaffinity[None, :]) != 0).any()
+    return bool(mjm.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL and can_touch and mjm.geom_condim.max() >= 3)
+
+
+def one_step_errors(task: str, states: int = 16, device: str = "cpu", seed: int = 0,
+                    nconmax: int | None = None, njmax: int | None = None,
+                    with_cone_check: bool = False) -> dict[str, Any]:
     """One step of ``task`` from ``states`` sampled states: dhrl vs MJWarp and dhrl vs host
     MuJoCo C. Returns per-part (qpos, qvel) max/median normwise relative errors, per-state
-    errors, timings, and ``supported=False`` with ``reason`` where MJWarp rejects the model."""
+    errors, timings, and ``supported=False`` with ``reason`` where MJWarp rejects the model.
+    ``with_cone_check`` adds :func:`cone_check` for models with pyramidal friction cones."""
     import mujoco
     import dhrl
 
@@ -354,21 +469,7 @@ def one_step_errors(task: str, states: int = 16, device: str = "cpu", seed: int 
     d_qpos, d_qvel = dhrl_obs[:, :nq_obs], dhrl_obs[:, nq_obs:nq_obs + mjm.nv]
 
     # host MuJoCo C (float64), rounded to float32 as dhrl's observation is.
-    data = mujoco.MjData(mjm)
-    host_qpos, host_qvel = np.empty_like(qpos), np.empty_like(qvel)
-    warmstart = np.empty_like(qvel)
-    before, host_after = np.empty(states), np.empty(states)
-    for i in range(states):
-        mujoco.mj_resetData(mjm, data)
-        data.qpos[:], data.qvel[:] = qpos[i], qvel[i]
-        mujoco.mj_forward(mjm, data)
-        warmstart[i] = data.qacc_warmstart
-        before[i] = progress_of(spec, mjm, data.qpos[None], data.xpos[None], data.xipos[None])[0]
-        data.ctrl[:] = actions[i].astype(np.float64)
-        for _ in range(spec.frame_skip):
-            mujoco.mj_step(mjm, data)
-        host_qpos[i], host_qvel[i] = data.qpos, data.qvel
-        host_after[i] = progress_of(spec, mjm, data.qpos[None], data.xpos[None], data.xipos[None])[0]
+    host_qpos, host_qvel, warmstart, before, host_after = host_one_step(spec, mjm, qpos, qvel, actions)
     dt = mjm.opt.timestep * spec.frame_skip
     # The script's own v4 reward formula (the one its MJWarp rollouts use) on the host data:
     # equal to dhrl's float32 reward up to its rounding.
@@ -384,50 +485,24 @@ def one_step_errors(task: str, states: int = 16, device: str = "cpu", seed: int 
         "states_with_contacts": int((contacts > 0).sum()),
         "frame_skip": spec.frame_skip,
         "integrator": mujoco.mjtIntegrator(mjm.opt.integrator).name,
+        "cone": mujoco.mjtCone(mjm.opt.cone).name,
         "host": {part: summary(e) for part, e in host_err.items()},
         "host_reward_abs_error": float(np.max(np.abs(dhrl_reward - host_reward))),
         "dhrl_s": round(dhrl_s, 3),
     }
 
-    wp, mjw = import_warp()
-    with wp.ScopedDevice(device):
-        try:
-            model = put_model(mjw, mjm)
-        except NotSupported as e:
-            result.update(supported=False, reason=str(e))
-            return result
-        mujoco.mj_resetData(mjm, data)
-        data.qpos[:], data.qvel[:] = qpos[0], qvel[0]
-        mujoco.mj_forward(mjm, data)
-        d = mjw.put_data(mjm, data, nworld=states, nconmax=nconmax, njmax=njmax)
-        d.qpos.assign(qpos.astype(np.float32))
-        d.qvel.assign(qvel.astype(np.float32))
-        d.ctrl.assign(actions)
-        d.qacc_warmstart.assign(warmstart.astype(np.float32))
-        started = time.perf_counter()
-        mjw.step(model, d)
-        wp.synchronize()
-        first_s = time.perf_counter() - started
-        started = time.perf_counter()
-        for _ in range(spec.frame_skip - 1):
-            mjw.step(model, d)
-        wp.synchronize()
-        rest_s = time.perf_counter() - started
-        w_qpos = d.qpos.numpy().astype(np.float64)
-        w_qvel = d.qvel.numpy().astype(np.float64)
-        w_after = progress_of(
-            spec, mjm, w_qpos,
-            d.xpos.numpy() if spec.progress.startswith("body-x") else None,
-            d.xipos.numpy() if spec.progress == "com-x" else None,
-        )
-        overflow = int(np.bitwise_or.reduce(d.overflow.numpy()))
-    m_qpos, m_qvel = observed(spec, w_qpos, w_qvel)
+    try:
+        w = mjwarp_one_step(spec, mjm, qpos, qvel, actions, warmstart, device, nconmax, njmax)
+    except NotSupported as e:
+        result.update(supported=False, reason=str(e))
+        return result
+    m_qpos, m_qvel = observed(spec, w["qpos"], w["qvel"])
     err = normwise(d_qpos, d_qvel, m_qpos, m_qvel)
     worst = int(np.argmax(np.maximum(err["qpos"], err["qvel"])))
     result.update(
         supported=True,
         mjwarp={part: summary(e) for part, e in err.items()},
-        mjwarp_reward_abs_error=summary(np.abs(dhrl_reward - reward_of(spec, before, w_after, dt, actions))),
+        mjwarp_reward_abs_error=summary(np.abs(dhrl_reward - reward_of(spec, before, w["progress"], dt, actions))),
         per_state={
             "qpos": err["qpos"].tolist(),
             "qvel": err["qvel"].tolist(),
@@ -435,10 +510,12 @@ def one_step_errors(task: str, states: int = 16, device: str = "cpu", seed: int 
             "contacts": contacts.tolist(),
         },
         worst_state={"index": worst, "advanced": int(advanced[worst]), "contacts": int(contacts[worst])},
-        mjwarp_first_step_s=round(first_s, 3),
-        mjwarp_step_ms=round(1e3 * rest_s / max(spec.frame_skip - 1, 1), 2),
-        overflow=overflow,
+        mjwarp_first_step_s=round(w["first_s"], 3),
+        mjwarp_step_ms=round(w["step_ms"], 2),
+        overflow=w["overflow"],
     )
+    if with_cone_check and has_pyramidal_friction(mjm):
+        result["cone_check"] = cone_check(spec, qpos, qvel, actions, device, nconmax, njmax)
     return result
 
 
@@ -684,12 +761,16 @@ def markdown(info: dict[str, str], one: list[dict], roll: list[dict], args) -> s
         "parts after one step (frame_skip substeps), max and median over the states. The host columns "
         "are dhrl vs `mujoco.mj_step` (same libmujoco, compared at dhrl's float32 observation). Reward "
         "|Δ|: dhrl's reward of the step vs the v4 formula computed from the other's qpos/xpos/xipos "
-        "(the formula the MJWarp rollouts use; the host column checks the formula itself).",
+        "(the formula the MJWarp rollouts use; the host column checks the formula itself). "
+        "C vs MJWarp: host MuJoCo C (float64) against MJWarp on the same states and controls, once "
+        "with the model's pyramidal friction cones and once with elliptic ones (both sides switched), "
+        "with the states whose error exceeds 1e-4; – where the model has no frictional contacts.",
         "",
         "| task | integrator × frame_skip | states (fresh / with contacts) | MJWarp qpos max | median | "
         "MJWarp qvel max | median | worst state (steps advanced, contacts) | MJWarp reward abs max | "
+        "C vs MJWarp max, pyramidal / elliptic cones | "
         "host qpos max | host qvel max | host reward abs max | first mjw.step s | mjw.step ms | wall s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in one:
         host = (f"{_g(r['host']['qpos']['max'])} | {_g(r['host']['qvel']['max'])} | "
@@ -697,14 +778,19 @@ def markdown(info: dict[str, str], one: list[dict], roll: list[dict], args) -> s
         head = f"| {r['task']} | {r['integrator'].removeprefix('mjINT_')} × {r['frame_skip']} | " \
                f"{r['states']} ({r['fresh_resets']} / {r['states_with_contacts']}) | "
         if not r.get("supported"):
-            lines.append(head + f"not supported: {r['reason']} | | | | | | {host} | | | {_g(r.get('wall_s'))} |")
+            lines.append(head + f"not supported: {r['reason']} | | | | | | | {host} | | | {_g(r.get('wall_s'))} |")
             continue
         w = r["mjwarp"]
         ws = r["worst_state"]
+        cc = r.get("cone_check")
+        cone = "–" if cc is None else (
+            f"{_g(cc['pyramidal']['max'])} (states {cc['pyramidal']['states_over_1e-4'] or '–'}) / "
+            f"{_g(cc['elliptic']['max'])} (states {cc['elliptic']['states_over_1e-4'] or '–'})"
+        )
         lines.append(
             head + f"{_g(w['qpos']['max'])} | {_g(w['qpos']['median'])} | {_g(w['qvel']['max'])} | "
             f"{_g(w['qvel']['median'])} | #{ws['index']} ({ws['advanced']}, {ws['contacts']}) | "
-            f"{_g(r['mjwarp_reward_abs_error']['max'])} | {host} | "
+            f"{_g(r['mjwarp_reward_abs_error']['max'])} | {cone} | {host} | "
             f"{r['mjwarp_first_step_s']:.1f} | {r['mjwarp_step_ms']:.1f} | {_g(r.get('wall_s'))} |"
         )
     if roll:
@@ -730,7 +816,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--states", type=int, default=16, help="states for the one-step check (K)")
     parser.add_argument("--rollout-steps", type=int, default=1000, help="env steps per copy (T)")
     parser.add_argument("--heavy-rollout-steps", type=int, default=None,
-                        help="T for ant and walker2d/hopper instead of --rollout-steps (to bound run time)")
+                        help="T for the heavy tasks (ant, hopper, walker2d, humanoid) instead of --rollout-steps")
     parser.add_argument("--worlds", type=int, default=8, help="copies in the rollout check (W)")
     parser.add_argument("--device", default="cpu", help="Warp device: cpu or cuda (cuda:N)")
     parser.add_argument("--seed", type=int, default=0)
@@ -738,6 +824,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--njmax", type=int, default=None, help="MJWarp constraint rows per world (default: its heuristic)")
     parser.add_argument("--kernel-cache-dir", default=None, help="Warp kernel cache (default: Warp's)")
     parser.add_argument("--skip-rollout", action="store_true", help="only the one-step check")
+    parser.add_argument("--no-cone-check", action="store_true",
+                        help="skip the host-C-vs-MJWarp rerun with elliptic friction cones")
     parser.add_argument("--json", action="store_true", help="JSON lines: a header object, then one per task")
     parser.add_argument("--out", default=None, help="also write the output to this file")
     args = parser.parse_args(argv)
@@ -759,7 +847,8 @@ def main(argv: list[str] | None = None) -> int:
     one, roll = [], []
     for task in tasks:
         started = time.perf_counter()
-        r1 = one_step_errors(task, args.states, args.device, args.seed, args.nconmax, args.njmax)
+        r1 = one_step_errors(task, args.states, args.device, args.seed, args.nconmax, args.njmax,
+                             with_cone_check=not args.no_cone_check)
         r1["wall_s"] = round(time.perf_counter() - started, 2)
         one.append(r1)
         print(f"{task}: one-step done in {r1['wall_s']:.1f} s", file=sys.stderr, flush=True)
