@@ -80,7 +80,6 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import sys
 import time
 from typing import Any
@@ -218,17 +217,6 @@ def task_seed(seed: int, task: str, stream: int) -> np.random.Generator:
     return np.random.default_rng([seed, TASK_ORDER.index(task), stream])
 
 
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 _warp_ready = False
 
 
@@ -256,6 +244,7 @@ def import_warp(kernel_cache_dir: str | None = None):
 
 def versions(device: str) -> dict[str, str]:
     import mujoco
+    from dhrl.bench import cpu_model
 
     out = {"mujoco": mujoco.__version__, "device": device, "cpu": cpu_model(), "cores": str(os.cpu_count())}
     try:

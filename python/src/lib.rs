@@ -45,6 +45,23 @@ impl Core {
             controls: vec![CopyStep::Step; n],
         })
     }
+
+    /// One step of every copy with `actions` (warm-up rows filled in) and `controls`, in
+    /// dhrl's float mode: what `Batch.step` and `Batch.time_native_steps` both run.
+    fn step(&mut self) -> PyResult<()> {
+        let _mode = FlushGuard::new();
+        let Core {
+            batch,
+            actions,
+            controls,
+            ..
+        } = self;
+        batch
+            .layer_mut()
+            .fill_warmup(actions)
+            .map_err(value_error)?;
+        batch.step_each(actions, controls).map_err(value_error)
+    }
 }
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
@@ -226,8 +243,8 @@ impl Batch {
     }
 
     /// Seconds `steps` steps of every copy take inside the library, actions cycling through the
-    /// `[K, N, act]` float32 table and warm-up rows filled in as [`Batch::step`] does, with
-    /// nothing built for Python: the native rate `python -m dhrl.bench` sets the Python path
+    /// `[K, N, act]` float32 table, each step the one [`Batch::step`] runs, with nothing built
+    /// for Python: the native rate `python -m dhrl.bench` sets the Python path
     /// beside, in the same process.
     fn time_native_steps(
         &self,
@@ -247,18 +264,14 @@ impl Batch {
                 self.act_dim
             )));
         }
+        core.controls.fill(CopyStep::Step);
         py.detach(|| -> PyResult<f64> {
-            let _mode = FlushGuard::new();
-            let Core { batch, actions, .. } = &mut *core;
             let rows = table.len() / row;
             let start = std::time::Instant::now();
             for k in 0..steps {
-                actions.copy_from_slice(&table[(k % rows) * row..(k % rows + 1) * row]);
-                batch
-                    .layer_mut()
-                    .fill_warmup(actions)
-                    .map_err(value_error)?;
-                batch.step(actions).map_err(value_error)?;
+                let at = (k % rows) * row;
+                core.actions.copy_from_slice(&table[at..at + row]);
+                core.step()?;
             }
             Ok(start.elapsed().as_secs_f64())
         })
@@ -312,20 +325,7 @@ impl Batch {
                 }
             }
         }
-        py.detach(|| -> PyResult<()> {
-            let _mode = FlushGuard::new();
-            let Core {
-                batch,
-                actions,
-                controls,
-                ..
-            } = &mut *core;
-            batch
-                .layer_mut()
-                .fill_warmup(actions)
-                .map_err(value_error)?;
-            batch.step_each(actions, controls).map_err(value_error)
-        })?;
+        py.detach(|| core.step())?;
         stepped(py, core)
     }
 }

@@ -241,11 +241,7 @@ impl Belief {
         if let Some(bias) = &self.token.bias {
             tokens = tokens + bias.val().unsqueeze_dims(&[0, 1]);
         }
-        let tokens = self.input_norm.forward(tokens);
-        let tokens = match dropout.as_deref_mut() {
-            Some(masks) => masks.apply(tokens),
-            None => tokens,
-        };
+        let tokens = dropped(dropout.as_deref_mut(), self.input_norm.forward(tokens));
         let causal = generate_autoregressive_mask(rows, delay, &tokens.device());
         self.output_norm
             .forward(encode(&self.encoder, tokens, causal, dropout))
@@ -292,6 +288,14 @@ impl DropoutMasks {
     }
 }
 
+/// `x` through `masks` when there are any (the belief in training), as it is otherwise.
+fn dropped<const D: usize>(masks: Option<&mut DropoutMasks>, x: Tensor<D>) -> Tensor<D> {
+    match masks {
+        Some(masks) => masks.apply(x),
+        None => x,
+    }
+}
+
 /// The forward pass of burn's pre-LN `TransformerEncoder` (`norm_first`), its weights as they
 /// are: per block `x + drop(MHA(norm_2(x)))`, then `x + drop(FF(norm_1(x)))` with
 /// `FF = outer(drop(GELU(inner(·))))`; attention weights dropped after the softmax. Without
@@ -302,10 +306,7 @@ pub fn encode(
     causal: Tensor<3, Bool>,
     mut dropout: Option<&mut DropoutMasks>,
 ) -> Tensor<3> {
-    let mut drop = |x: Tensor<3>| match dropout.as_deref_mut() {
-        Some(masks) => masks.apply(x),
-        None => x,
-    };
+    let mut drop = |x: Tensor<3>| dropped(dropout.as_deref_mut(), x);
     let mut x = tokens;
     for layer in &encoder.layers {
         let attended = attention(

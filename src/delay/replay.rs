@@ -146,7 +146,6 @@ impl ReplayStore {
         self.len() == 0
     }
 
-    /// Appends the records of one step of the delay layer.
     /// Stores what the last step of `batch` completed, flagging the copies whose episode the
     /// simulation's divergence ended (training's one way in); returns how many there were.
     pub fn push_step(&mut self, batch: &super::DelayedBatch) -> Result<u64, ReplayError> {
@@ -155,7 +154,7 @@ impl ReplayStore {
         Ok(diverged.iter().filter(|&&d| d != 0).count() as u64)
     }
 
-    /// Stores the records one step completed. `diverged` (`[N]`) flags the copies whose
+    /// Appends the records of one step of the delay layer. `diverged` (`[N]`) flags the copies whose
     /// episode that step ended by the simulation's divergence: their last step is kept as the
     /// context of the steps before it but never sampled as a transition.
     pub fn push(&mut self, records: &RecordBatch, diverged: &[u32]) -> Result<(), ReplayError> {
