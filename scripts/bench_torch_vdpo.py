@@ -29,9 +29,9 @@ requires N to be a whole number of `bc_every` periods, so that each side's mean 
 exactly one burst per `bc_every` updates, as training does: one update averages one reference
 step, one belief step and bc_updates / bc_every = 1 cloning step. The default N is one period,
 1000 updates (1001 with the warm-up, one burst of 1000 cloning steps): a few minutes for
-PyTorch on one thread, and longer for dhrl (the README measured 373–791 ms per VDPO update on
-one thread, so 6–13 minutes). `--bc-every 10 --bc-updates 10 --updates 100` keeps the same
-ratio of one cloning step per update at a tenth of the cost, as the README's table does.
+PyTorch on one thread, and longer for dhrl (docs/results/update-costs.md measured 373–791 ms
+per VDPO update on one thread, so 6–13 minutes). `--bc-every 10 --bc-updates 10 --updates 100`
+keeps the same ratio of one cloning step per update at a tenth of the cost, as that table does.
 
 Batches are fixed and random at the task's sizes (as `random_batch` in src/algos/mod.rs):
 uniform in [−1, 1), terminations on every fifth row, the augmented state x = (s_{t−Δ},

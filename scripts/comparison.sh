@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The runs behind the README's D2HPG comparison and lifting-settings tables, and their plots.
+# The runs behind docs/experiments.md's D2HPG comparison and lifting-settings tables, and their plots.
 #
 #   scripts/comparison.sh SET [--jobs N] [--seeds "0 1 2"] [--algos "A B"] [--runs DIR] [--dry-run]
 #

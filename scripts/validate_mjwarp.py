@@ -80,6 +80,7 @@ import argparse
 import dataclasses
 import json
 import os
+import pathlib
 import sys
 import time
 from typing import Any
@@ -244,7 +245,12 @@ def import_warp(kernel_cache_dir: str | None = None):
 
 def versions(device: str) -> dict[str, str]:
     import mujoco
-    from dhrl.bench import cpu_model
+
+    # The benchmarks' report helper (python/benchmarks/machine.py), shared rather than copied.
+    benchmarks = str(pathlib.Path(__file__).resolve().parents[1] / "python" / "benchmarks")
+    if benchmarks not in sys.path:
+        sys.path.insert(0, benchmarks)
+    from machine import cpu_model
 
     out = {"mujoco": mujoco.__version__, "device": device, "cpu": cpu_model(), "cores": str(os.cpu_count())}
     try:

@@ -72,7 +72,7 @@ fn presets_expand_into_the_papers_grid_with_stable_ids() {
                 .unwrap()
                 .iter()
                 .all(|r| r.config.delay.warmup == WarmupActions::Zeros),
-            "{preset}: zero warm-up actions, as the paper's numbers need (README, Warm-up)"
+            "{preset}: zero warm-up actions, as the paper's numbers need (docs/results/warmup-evidence.md)"
         );
     }
     let noise = Experiment::preset("noise").unwrap().expand().unwrap();
@@ -114,7 +114,7 @@ fn presets_expand_into_the_papers_grid_with_stable_ids() {
 }
 
 /// A quick look at a preset: restricted, scaled (steps and checkpoint interval) and evaluated
-/// more often, as the reduced reproduction in the README was planned.
+/// more often, as the reduced reproduction of docs/repro/README.md was planned.
 #[test]
 fn a_preset_is_restricted_scaled_and_evaluated_more_often() {
     let dir = tempfile::tempdir().unwrap();

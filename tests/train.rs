@@ -933,3 +933,21 @@ fn walk_sizes(dir: &Path) -> u64 {
         })
         .sum()
 }
+
+/// `dhrl train --help` explains every flag: none is listed without a line of help.
+#[test]
+fn every_train_flag_has_help() {
+    use clap::Args;
+    let command = dhrl::train::TrainArgs::augment_args(clap::Command::new("train"));
+    let mut checked = 0;
+    for arg in command.get_arguments() {
+        let help = arg.get_help().map(|h| h.to_string()).unwrap_or_default();
+        assert!(
+            help.trim().len() > 10,
+            "--{}: no help text in `dhrl train --help`",
+            arg.get_id()
+        );
+        checked += 1;
+    }
+    assert!(checked >= 20, "{checked} flags checked");
+}

@@ -15,7 +15,7 @@ import dhrl
 def evaluate(policy: Callable[[np.ndarray], np.ndarray], task: str, delay: int, episodes: int, seed: int) -> list[float]:
     """Returns of ``episodes`` episodes, one per copy of a fresh env, ``policy`` mapping the
     augmented states ``[N, obs + Δ·act]`` to actions deterministically."""
-    env = dhrl.make_vec(task, episodes, delay=delay, seed=seed)
+    env = dhrl.make_vec(task, episodes, delay=delay, seed=seed, episode_statistics=True)
     obs, _ = env.reset()
     returns = np.full(episodes, np.nan)
     while np.isnan(returns).any():

@@ -3,9 +3,14 @@
 ``dhrl.make_vec(task, num_envs, delay=…)`` returns a ``gymnasium.vector.VectorEnv`` whose copies
 step in parallel in Rust (the GIL released); ``dhrl.sb3.make_vec`` wraps it as a
 Stable-Baselines3 ``VecEnv``. See ``dhrl.vector`` for exactly what a delayed agent receives.
+Importing dhrl registers its tasks with Gymnasium (``dhrl.registration``):
+``gymnasium.make_vec("dhrl/HalfCheetah-delayed-v0", num_envs=16, delay=5)`` builds the same env.
 """
 
 from ._dhrl import MAX_DELAY
+from .registration import GYMNASIUM_IDS, register_envs
 from .vector import TASKS, DelayedVectorEnv, make_vec, task_name
 
-__all__ = ["MAX_DELAY", "TASKS", "DelayedVectorEnv", "make_vec", "task_name"]
+register_envs()
+
+__all__ = ["GYMNASIUM_IDS", "MAX_DELAY", "TASKS", "DelayedVectorEnv", "make_vec", "task_name"]

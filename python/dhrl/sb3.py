@@ -5,7 +5,8 @@ augmented states (augmented SAC). SB3's conventions: a copy resets in the step t
 episode (its last observation in ``infos[i]["terminal_observation"]``), ``dones`` is
 terminated or truncated, ``infos[i]["TimeLimit.truncated"]`` marks time-limit ends (SB3's
 replay buffer bootstraps them), and ``infos[i]["episode"]`` holds ``{"r", "l", "t"}`` as SB3's
-``Monitor`` writes it, so SB3's logger reports episode returns without another wrapper.
+``Monitor`` writes it (from the env's own statistics, which ``make_vec`` turns on), so SB3's
+logger reports episode returns without another wrapper.
 """
 
 from __future__ import annotations
@@ -26,12 +27,19 @@ from .vector import DelayedVectorEnv
 
 
 class DhrlVecEnv(VecEnv):
-    """A same-step :class:`dhrl.DelayedVectorEnv` behind SB3's ``VecEnv`` interface."""
+    """A same-step :class:`dhrl.DelayedVectorEnv` with its own episode statistics behind SB3's
+    ``VecEnv`` interface."""
 
     def __init__(self, env: DelayedVectorEnv):
         if env.metadata["autoreset_mode"].name != "SAME_STEP":
             raise ValueError(
-                "DhrlVecEnv needs a same-step env: dhrl.make_vec(..., autoreset_mode='same_step') "
+                "DhrlVecEnv needs a same-step env: dhrl.make_vec(..., autoreset_mode='same_step', "
+                "episode_statistics=True) (or use dhrl.sb3.make_vec)"
+            )
+        if not getattr(env, "episode_statistics", False):
+            raise ValueError(
+                "DhrlVecEnv reports each episode in SB3's Monitor form from the env's own "
+                "statistics: dhrl.make_vec(..., autoreset_mode='same_step', episode_statistics=True) "
                 "(or use dhrl.sb3.make_vec)"
             )
         self.env = env
@@ -95,8 +103,15 @@ class DhrlVecEnv(VecEnv):
 
 
 def make_vec(task: str, num_envs: int, **options: Any) -> DhrlVecEnv:
-    """:func:`dhrl.make_vec` with the same options, as an SB3 ``VecEnv`` (same-step reset)."""
+    """:func:`dhrl.make_vec` with the same options, as an SB3 ``VecEnv`` (same-step reset, the
+    env's own episode statistics on)."""
     if options.get("autoreset_mode", "same_step") != "same_step":
         raise ValueError("SB3 resets in the step that ends an episode: autoreset_mode must be 'same_step'")
+    if options.get("episode_statistics", True) is not True:
+        raise ValueError(
+            "the SB3 adapter reports episodes from the env's own statistics: episode_statistics "
+            "must be True (SB3's VecMonitor may still wrap it)"
+        )
     options["autoreset_mode"] = "same_step"
+    options["episode_statistics"] = True
     return DhrlVecEnv(DelayedVectorEnv(task, num_envs, **options))

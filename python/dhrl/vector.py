@@ -18,9 +18,13 @@ What the agent receives (the delay layer of the Rust library, the path ``dhrl tr
 * ``info["state"]``: the true current states ``s_t`` ``[num_envs, obs_dim]``, of the same
   moment as the observation; ``info["transitions"]``: the time-aligned transitions
   ``(x_τ, s_τ, a_τ, r_τ, x_{τ+1}, s_{τ+1}, terminated)`` completed at this step, as arrays
-  (``env`` and ``tau`` say whose and which step), ready for a replay buffer;
-  ``info["episode"]`` / ``info["_episode"]``: ``RecordEpisodeStatistics``' form (true return,
-  true length, seconds) where an episode ended.
+  (``env`` and ``tau`` say whose and which step), ready for a replay buffer.
+* **Episode statistics** are left to Gymnasium's ``gymnasium.wrappers.vector.RecordEpisodeStatistics``
+  (the delivered rewards add up to the true return and every step of an episode is one call, so
+  its ``r`` and ``l`` are the true return and length). With ``episode_statistics=True`` the env
+  writes them itself, in that wrapper's form: ``info["episode"]`` / ``info["_episode"]`` (true
+  return, true length, seconds) where an episode ended; that key then collides with the
+  wrapper's, so use one or the other.
 
 Autoreset: ``"next_step"`` (Gymnasium's default: the step after the end returns the first
 observation of the next episode, reward 0 and no flags, ignoring that copy's action),
@@ -67,15 +71,25 @@ def task_name(task: Any) -> str:
     raise ValueError(f"unknown task {task!r}; accepted: {accepted}")
 
 
-def _integer(name: str, value: Any, minimum: int, allow_none: bool = False) -> int | None:
-    if value is None and allow_none:
-        return None
+def _integer(name: str, value: Any, minimum: int, kind: str = "an integer") -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        kind = "an integer or None" if allow_none else "an integer"
         raise TypeError(f"{name} must be {kind} ≥ {minimum}; got {value!r} ({type(value).__name__})")
     if value < minimum:
         raise ValueError(f"{name} must be ≥ {minimum}; got {value}")
     return int(value)
+
+
+def _optional_integer(name: str, value: Any, minimum: int) -> int | None:
+    return None if value is None else _integer(name, value, minimum, "an integer or None")
+
+
+def _nonnegative_real(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a number ≥ 0; got {value!r}")
+    number = float(value)
+    if not (math.isfinite(number) and number >= 0):
+        raise ValueError(f"{name} must be a finite number ≥ 0; got {value}")
+    return number
 
 
 def _autoreset_mode(value: Any) -> AutoresetMode:
@@ -104,7 +118,9 @@ class DelayedVectorEnv(VectorEnv):
     delays in ``1..max_delay`` instead of a fixed one (the agent holds each observation until it
     is ``max_delay`` old); ``actuator_noise``: σ of Gaussian noise on the executed action,
     clipped to the bounds; ``warmup``: what runs before the first observation arrives
-    (``"zeros"`` or ``"random"``). Copy ``i`` draws from stream ``i`` of ``seed``.
+    (``"zeros"`` or ``"random"``); ``episode_statistics``: write ``info["episode"]`` itself
+    (off by default: wrap the env in Gymnasium's ``RecordEpisodeStatistics`` instead, which
+    needs that key free). Copy ``i`` draws from stream ``i`` of ``seed``.
     """
 
     def __init__(
@@ -119,21 +135,19 @@ class DelayedVectorEnv(VectorEnv):
         seed: int = 0,
         num_threads: int | None = None,
         autoreset_mode: str | AutoresetMode = "next_step",
-    ):
+        episode_statistics: bool = False,
+    ) -> None:
         name = task_name(task)
         num_envs = _integer("num_envs", num_envs, 1)
         delay = _integer("delay", delay, 0)
         action_delay = _integer("action_delay", action_delay, 0)
-        max_delay = _integer("max_delay", max_delay, 1, allow_none=True)
+        max_delay = _optional_integer("max_delay", max_delay, 1)
         if max_delay is not None and delay != 0:
             raise ValueError(
                 f"delay={delay} with max_delay={max_delay}: max_delay turns on random observation "
                 "delays in 1..max_delay, which replace the fixed one; give one of them"
             )
-        if isinstance(actuator_noise, bool) or not isinstance(actuator_noise, numbers.Real):
-            raise TypeError(f"actuator_noise must be a number ≥ 0; got {actuator_noise!r}")
-        if not (math.isfinite(actuator_noise) and actuator_noise >= 0):
-            raise ValueError(f"actuator_noise must be a finite number ≥ 0; got {actuator_noise}")
+        actuator_noise = _nonnegative_real("actuator_noise", actuator_noise)
         if warmup not in ("zeros", "random"):
             raise ValueError(f"warmup {warmup!r}; accepted: 'zeros' or 'random'")
         seed = _integer("seed", seed, 0)
@@ -141,9 +155,12 @@ class DelayedVectorEnv(VectorEnv):
             num_threads = max(1, min(num_envs, os.cpu_count() or 1))
         num_threads = _integer("num_threads", num_threads, 1)
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
+        if not isinstance(episode_statistics, (bool, np.bool_)):
+            raise TypeError(f"episode_statistics must be True or False; got {episode_statistics!r}")
+        self.episode_statistics = bool(episode_statistics)
 
         self._batch = _dhrl.Batch(
-            name, num_envs, delay, action_delay, max_delay, float(actuator_noise), warmup, seed,
+            name, num_envs, delay, action_delay, max_delay, actuator_noise, warmup, seed,
             num_threads,
         )
         self.task = name
@@ -179,8 +196,9 @@ class DelayedVectorEnv(VectorEnv):
             "delay": delay,
             "action_delay": action_delay,
             "max_delay": max_delay,
-            "actuator_noise": float(actuator_noise),
+            "actuator_noise": actuator_noise,
             "warmup": warmup,
+            "episode_statistics": self.episode_statistics,
         }
         self._seeded_at_build = True
         # Copies whose episode ended in the last step (next-step / disabled modes).
@@ -238,8 +256,9 @@ class DelayedVectorEnv(VectorEnv):
             self._episode_started[restart] = now
             if mask is not None:
                 keep = ~mask
-                for key, shown in (("augmented", self._obs), ("state", self._state), ("ready", self._ready)):
-                    out[key][keep] = shown[keep]
+                out["augmented"][keep] = self._obs[keep]
+                out["state"][keep] = self._state[keep]
+                out["ready"][keep] = self._ready[keep]
         self._seeded_at_build = False
         return self._show(out["augmented"], out["state"], out["ready"])
 
@@ -270,12 +289,13 @@ class DelayedVectorEnv(VectorEnv):
         }
         now = time.perf_counter()
         if done.any():
-            info["episode"] = {
-                "r": np.where(done, out["episode_return"], 0.0).astype(np.float32),
-                "l": np.where(done, out["episode_length"], 0).astype(np.int64),
-                "t": np.where(done, np.round(now - self._episode_started, 6), 0.0),
-            }
-            info["_episode"] = done
+            if self.episode_statistics:
+                info["episode"] = {
+                    "r": np.where(done, out["episode_return"], 0.0).astype(np.float32),
+                    "l": np.where(done, out["episode_length"], 0).astype(np.int64),
+                    "t": np.where(done, np.round(now - self._episode_started, 6), 0.0),
+                }
+                info["_episode"] = done
             if out["diverged"].any():
                 info["diverged"] = out["diverged"]
         if mode == AutoresetMode.SAME_STEP:
@@ -292,9 +312,10 @@ class DelayedVectorEnv(VectorEnv):
                     "_state": done,
                     "ready": done & (out["episode_length"] >= self.delay),
                     "_ready": done,
-                    "episode": info["episode"],
-                    "_episode": done,
                 }
+                if self.episode_statistics:
+                    info["final_info"]["episode"] = info["episode"]
+                    info["final_info"]["_episode"] = done
         elif done.any():
             # Next-step and disabled: this step shows the finished episode's last moment.
             obs = obs.copy()
@@ -325,7 +346,7 @@ class DelayedVectorEnv(VectorEnv):
         return obs, {"state": state, "ready": ready}
 
     def close_extras(self, **kwargs: Any) -> None:
-        self._batch = None
+        del self._batch  # frees the copies now
 
     def __repr__(self) -> str:
         options = ", ".join(f"{k}={v!r}" for k, v in self.config.items() if k != "task")
@@ -374,5 +395,5 @@ def make_vec(task: str, num_envs: int, **options: Any) -> DelayedVectorEnv:
     """``num_envs`` copies of ``task`` (``"half-cheetah"`` or ``"HalfCheetah-v4"``) as the
     delayed agent lives in them: a :class:`DelayedVectorEnv`, whose options it takes
     (``delay=0, action_delay=0, max_delay=None, actuator_noise=0.0, warmup="zeros", seed=0,
-    num_threads=None, autoreset_mode="next_step"``)."""
+    num_threads=None, autoreset_mode="next_step", episode_statistics=False``)."""
     return DelayedVectorEnv(task, num_envs, **options)

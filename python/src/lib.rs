@@ -244,8 +244,8 @@ impl Batch {
 
     /// Seconds `steps` steps of every copy take inside the library, actions cycling through the
     /// `[K, N, act]` float32 table, each step the one [`Batch::step`] runs, with nothing built
-    /// for Python: the native rate `python -m dhrl.bench` sets the Python path
-    /// beside, in the same process.
+    /// for Python: the native rate `python/benchmarks/env_throughput.py` sets the Python
+    /// path beside, in the same process.
     fn time_native_steps(
         &self,
         py: Python<'_>,

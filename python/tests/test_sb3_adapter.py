@@ -54,6 +54,7 @@ class Scripted:
     """A same-step env whose one step returns what the test says."""
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP}
+    episode_statistics = True
     num_envs = 3
     single_observation_space = gym.spaces.Box(-1, 1, (2,), np.float32)
     single_action_space = gym.spaces.Box(-1, 1, (1,), np.float32)
@@ -90,7 +91,7 @@ def test_time_limit_flag_is_set_only_for_time_limit_ends(sb3_adapter):
 
 def test_steps_follow_the_same_step_env_they_wrap(sb3_adapter):
     env = sb3_adapter.make_vec("hopper", 4, delay=2, seed=0)
-    twin = dhrl.make_vec("hopper", 4, delay=2, seed=0, autoreset_mode="same_step")
+    twin = dhrl.make_vec("hopper", 4, delay=2, seed=0, autoreset_mode="same_step", episode_statistics=True)
     np.testing.assert_array_equal(env.reset(), twin.reset()[0])
     rng = np.random.default_rng(0)
     ends = 0
@@ -109,8 +110,23 @@ def test_steps_follow_the_same_step_env_they_wrap(sb3_adapter):
                 np.testing.assert_array_equal(infos[i]["terminal_observation"], info["final_obs"][i])
                 assert infos[i]["TimeLimit.truncated"] == bool(trunc[i] and not term[i])
                 assert infos[i]["episode"]["l"] == info["episode"]["l"][i]
+                assert infos[i]["episode"]["r"] == float(info["episode"]["r"][i])
             else:
                 assert "terminal_observation" not in infos[i]
     assert ends > 0
     with pytest.raises(RuntimeError, match="without step_async"):
         env.step_wait()
+
+
+def test_the_adapter_needs_the_envs_own_episode_statistics(sb3_adapter):
+    """SB3's Monitor form comes from the env's statistics: an env without them is refused by
+    name, and make_vec turns them on (and refuses to turn them off)."""
+    plain = dhrl.make_vec("hopper", 2, autoreset_mode="same_step")
+    assert plain.episode_statistics is False
+    with pytest.raises(ValueError, match="episode_statistics=True"):
+        sb3_adapter.DhrlVecEnv(plain)
+    with pytest.raises(ValueError, match="autoreset_mode='same_step'"):
+        sb3_adapter.DhrlVecEnv(dhrl.make_vec("hopper", 2, episode_statistics=True))
+    assert sb3_adapter.make_vec("hopper", 2).env.episode_statistics is True
+    with pytest.raises(ValueError, match="episode_statistics must be True"):
+        sb3_adapter.make_vec("hopper", 2, episode_statistics=False)

@@ -1,5 +1,5 @@
 """The vector-env contract: spaces, dtypes, seeding, autoreset in every mode, reset masks,
-episode statistics, and the delayed channels as documented in dhrl.vector."""
+episode statistics (opt-in), and the delayed channels as documented in dhrl.vector."""
 
 import numpy as np
 import pytest
@@ -83,7 +83,7 @@ def test_warmup_zeros_observations_and_rewards_before_delta():
 
 
 def test_next_step_autoreset_and_episode_statistics():
-    env = dhrl.make_vec("hopper", 6, delay=2)
+    env = dhrl.make_vec("hopper", 6, delay=2, episode_statistics=True)
     rng = np.random.default_rng(0)
     env.reset(seed=3)
     returns = np.zeros(6)
@@ -114,8 +114,8 @@ def test_next_step_autoreset_and_episode_statistics():
 
 
 def test_same_step_autoreset_final_keys():
-    nxt = dhrl.make_vec("hopper", 4, delay=2, seed=1)
-    same = dhrl.make_vec("hopper", 4, delay=2, seed=1, autoreset_mode="same_step")
+    nxt = dhrl.make_vec("hopper", 4, delay=2, seed=1, episode_statistics=True)
+    same = dhrl.make_vec("hopper", 4, delay=2, seed=1, autoreset_mode="same_step", episode_statistics=True)
     assert same.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
     rng = np.random.default_rng(2)
     nxt.reset()
@@ -135,6 +135,8 @@ def test_same_step_autoreset_final_keys():
                 np.testing.assert_array_equal(i2["final_observation"][i], o1[i])
                 np.testing.assert_array_equal(i2["final_info"]["state"][i], i1["state"][i])
             assert i2["_final_obs"].tolist() == d.tolist()
+            assert i2["final_info"]["_episode"].tolist() == d.tolist()
+            np.testing.assert_array_equal(i2["final_info"]["episode"]["l"], i1["episode"]["l"])
             # The same step already shows the next episode's first observation.
             assert not o2[d, 11:].any() and not i2["ready"][d].any()
             seen += 1
@@ -196,7 +198,7 @@ def test_every_step_of_an_episode_is_one_call_and_the_show_step_is_no_step(mode,
     """Counting the calls in which a copy lives gives its episode length: next-step's extra
     call after an end only shows the new episode (held, reward 0); same-step has none, the
     first action of a new episode is applied on the call after the end."""
-    env = dhrl.make_vec("hopper", 4, delay=delay, autoreset_mode=mode, seed=5)
+    env = dhrl.make_vec("hopper", 4, delay=delay, autoreset_mode=mode, seed=5, episode_statistics=True)
     rng = np.random.default_rng(1)
     env.reset()
     lived = np.zeros(4, int)
@@ -262,3 +264,24 @@ def test_transitions_are_time_aligned():
             # The transition of step τ completes when s_{τ+1} reaches the agent: t = τ + 1 + Δ.
             assert t == tau + 1 + delay
     assert total > 0
+
+
+@pytest.mark.parametrize("mode", ["next_step", "same_step", "disabled"])
+def test_episode_statistics_are_off_by_default(mode):
+    """Without ``episode_statistics=True`` the env writes no ``episode`` key anywhere (Gymnasium's
+    RecordEpisodeStatistics needs it free); ends, divergence and final keys are unchanged."""
+    env = dhrl.make_vec("inverted-pendulum", 3, delay=2, autoreset_mode=mode, seed=0)
+    assert env.episode_statistics is False and env.config["episode_statistics"] is False
+    env.reset()
+    big = np.full((3, 1), 3.0, np.float32)
+    for _ in range(200):
+        obs, reward, term, trunc, info = env.step(big)
+        if (term | trunc).any():
+            break
+    assert (term | trunc).any(), "InvertedPendulum falls under a full push"
+    assert "episode" not in info and "_episode" not in info
+    if mode == "same_step":
+        assert "final_obs" in info
+        assert "episode" not in info["final_info"] and "_episode" not in info["final_info"]
+    with pytest.raises(TypeError, match="episode_statistics must be True or False"):
+        dhrl.make_vec("hopper", 1, episode_statistics="yes")

@@ -2,8 +2,9 @@
 //! state `x_t = (s_{t-Δ}, a_{t-Δ}, …, a_{t-1})`, which makes the delayed problem an MDP again
 //! at the price of an input that grows with Δ; training uses `(x_t, a_t, r_t, x_{t+1})`.
 //! Everything else is [`super::sac`]'s update.
+use super::agent::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo};
+use super::sac::Config as SacConfig;
 use super::sac::{InputView, SacAgent};
-use super::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig};
 use crate::learn::Devices;
 
 crate::algo_config! {
@@ -16,6 +17,7 @@ crate::algo_config! {
 impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo::single_learner(
         "augmented-sac",
+        "Augmented SAC",
         "SAC with actor and critic on the augmented state x_t",
         true,
     );

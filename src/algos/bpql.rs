@@ -8,16 +8,16 @@
 //! - temperature and targets as in SAC.
 //!
 //! These are exactly [`SacLearner`]'s steps with the actor's input `x` and the critics' input
-//! `s`, which is what [`transition_tensors`] hands it. BPQL is also the regular learner of
-//! D2HPG (`d2hpg.rs`).
+//! `s` ([`beta_batch`]). BPQL is also the regular learner of D2HPG (`d2hpg.rs`).
 use std::path::Path;
 
-use super::sac::{SacLearner, SacStats, transition_tensors};
-use super::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig, Stats, UpdateContext,
-};
-use crate::delay::ReplayError;
-use crate::learn::{Devices, LearnError};
+use burn::prelude::Device;
+
+use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats};
+use super::context::UpdateContext;
+use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats};
+use crate::delay::{ReplayError, Transitions};
+use crate::learn::{Devices, LearnError, TransitionTensors};
 
 crate::algo_config! {
     /// BPQL's configuration: SAC's.
@@ -27,11 +27,15 @@ crate::algo_config! {
 }
 
 impl AlgoConfig for Config {
-    const INFO: AlgoInfo = AlgoInfo::single_learner(
-        "bpql",
-        "actor on x_t, beta critic on the time-aligned true state s_t",
-        true,
-    );
+    const INFO: AlgoInfo = AlgoInfo {
+        in_lifting_ablation: true,
+        ..AlgoInfo::single_learner(
+            "bpql",
+            "BPQL",
+            "actor on x_t, beta critic on the time-aligned true state s_t",
+            true,
+        )
+    };
 
     fn validate(&self) -> Result<(), AlgoError> {
         self.sac.check(Self::INFO.name)
@@ -88,7 +92,7 @@ impl Agent for Bpql {
         let batch = ctx.batch()?;
         let stats = self
             .learner
-            .update(&transition_tensors(&batch, &self.learner.devices.plain));
+            .update(&beta_batch(&batch, &self.learner.devices.plain));
         Ok(stats.named())
     }
 
@@ -99,4 +103,14 @@ impl Agent for Bpql {
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
         self.learner.load(dir, "")
     }
+}
+
+/// BPQL's split of a batch: the actor on `(x, x')`, the beta critic on `(s, s')`.
+pub(super) fn beta_batch(batch: &Transitions, device: &Device) -> SacBatch {
+    let t = TransitionTensors::new(batch, device);
+    SacBatch::new(
+        &t,
+        (t.augmented.clone(), t.next_augmented.clone()),
+        (t.state.clone(), t.next_state.clone()),
+    )
 }

@@ -14,8 +14,8 @@ enum Source<'a> {
     Fixed(&'a Transitions),
 }
 
-/// Handed to [`super::Agent::update`]: an agent draws as many batches as it needs (with the
-/// optional fields it declared in [`super::Agent::batch_extras`]) and may schedule work by the
+/// Handed to [`super::agent::Agent::update`]: an agent draws as many batches as it needs (with the
+/// optional fields it declared in [`super::agent::Agent::batch_extras`]) and may schedule work by the
 /// counters.
 pub struct UpdateContext<'a> {
     source: Source<'a>,

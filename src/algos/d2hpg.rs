@@ -22,14 +22,15 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::bpql::bpql_learner;
-use super::sac::{SacBatch, SacLearner, transition_tensors};
-use super::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, SacConfig,
-    Stats, UpdateContext, check,
+use super::agent::{
+    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role,
+    Stats, check,
 };
+use super::bpql::{beta_batch, bpql_learner};
+use super::context::UpdateContext;
+use super::sac::{Config as SacConfig, SacBatch, SacLearner};
 use crate::delay::ReplayError;
-use crate::learn::{Devices, LearnError, Noise, lifting_loss, squashed_samples_k};
+use crate::learn::{CheckpointDir, Devices, LearnError, Noise, lifting_loss, squashed_samples_k};
 use crate::seeds;
 
 crate::algo_config! {
@@ -37,7 +38,7 @@ crate::algo_config! {
     pub struct Config {
         ..sac: SacConfig;
         /// λ, the weight of L_lift in the regular actor's loss (1: ahead of the settings
-        /// compared in the README on HalfCheetah at Δ = 10, two seeds).
+        /// compared in docs/experiments.md on HalfCheetah at Δ = 10, two seeds).
         pub lifting_weight: f64 = 1.0,
         /// K, samples per state for the means and standard deviations of L_lift (at least 2).
         pub lifting_samples: usize = 2,
@@ -67,6 +68,9 @@ impl Config {
 /// What both variants declare, but for their names.
 const D2HPG_INFO: AlgoInfo = AlgoInfo {
     name: "d2hpg",
+    paper_name: "D2HPG",
+    role: Role::Proposed,
+    in_lifting_ablation: true,
     about: "the paper's D2HPG(-BPQL): BPQL, a delay-free SAC, and the lifting loss",
     acts_on_augmented_state: true,
     delay_free_policy: true,
@@ -102,6 +106,8 @@ impl ConfigFields for NaiveConfig {
 impl AlgoConfig for NaiveConfig {
     const INFO: AlgoInfo = AlgoInfo {
         name: "d2hpg-naive",
+        paper_name: "D2HPG-naive",
+        role: Role::Ablation,
         about: "a delay-free SAC plus a regular policy trained by the lifting loss only",
         ..D2HPG_INFO
     };
@@ -205,7 +211,8 @@ impl Agent for D2hpg {
     fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
         let batch = &ctx.batch()?;
         let plain = self.regular.devices.plain.clone();
-        let regular_batch = transition_tensors(batch, &plain);
+        let regular_batch = beta_batch(batch, &plain);
+        // The delay-free learner: actor and critics on the true state.
         let free_batch = SacBatch {
             actor_input: regular_batch.critic_input.clone(),
             next_actor_input: regular_batch.next_critic_input.clone(),
@@ -285,28 +292,13 @@ impl Agent for D2hpg {
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
         self.regular.save(dir, "regular_")?;
         self.delay_free.save(dir, "delay_free_")?;
-        let path = dir.join("lifting_noise.json");
-        let text = serde_json::to_vec(&self.lifting_noise).map_err(|e| LearnError::Save {
-            what: path.display().to_string(),
-            message: e.to_string(),
-        })?;
-        std::fs::write(&path, text).map_err(|e| LearnError::Save {
-            what: path.display().to_string(),
-            message: e.to_string(),
-        })
+        CheckpointDir::new(dir).save_json("lifting_noise.json", &self.lifting_noise)
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
         self.regular.load(dir, "regular_")?;
         self.delay_free.load(dir, "delay_free_")?;
-        let path = dir.join("lifting_noise.json");
-        let load_error = |e: String| LearnError::Load {
-            what: path.display().to_string(),
-            message: e,
-        };
-        let bytes = std::fs::read(&path).map_err(|e| load_error(e.to_string()))?;
-        self.lifting_noise =
-            serde_json::from_slice(&bytes).map_err(|e| load_error(e.to_string()))?;
+        self.lifting_noise = CheckpointDir::new(dir).load_json("lifting_noise.json")?;
         Ok(())
     }
 }

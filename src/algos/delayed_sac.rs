@@ -9,7 +9,7 @@
 //! - an MLP forward model trained by `L_f = E[‖f(s_τ, a_τ) − s_{τ+1}‖²] / dim(S)` on the same
 //!   batch, which predicts the difference `s' − s` (added back to `s`) from inputs normalised by
 //!   running means and standard deviations of the states and actions it was trained on (both
-//!   are fields; the README gives the measured comparison of the choices);
+//!   are fields);
 //! - acting: `a_t ~ π(f^Δ(s_{t−Δ}, a_{t−Δ}, …, a_{t−1}))`, `f^Δ` the model applied Δ times to
 //!   the observation and the pending actions of `x_t`.
 //!
@@ -25,16 +25,14 @@ use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::sac::{
-    SacBatch, SacLearner, SacStats, adam, load_error, load_module, load_optimizer, materialize,
-    rows, save_error, transition_tensors,
-};
-use super::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig, Stats, UpdateContext,
-    check,
-};
+use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, check};
+use super::context::UpdateContext;
+use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats};
 use crate::delay::{BatchExtras, ReplayError, Transitions};
-use crate::learn::{Devices, LearnError, Mlp, MlpConfig, matrix, to_vec};
+use crate::learn::{
+    CheckpointDir, Devices, LearnError, Mlp, MlpConfig, TransitionTensors, adam, materialize,
+    matrix, rows, to_vec,
+};
 use crate::seeds;
 
 /// What the model's network outputs.
@@ -66,6 +64,7 @@ crate::algo_config! {
 impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo::single_learner(
         "delayed-sac",
+        "Delayed SAC",
         "SAC on s_t, acting on the state a learned one-step model predicts over the Δ pending actions",
         false,
     );
@@ -242,7 +241,7 @@ impl DelayedSac {
                     .normalise_model_inputs
                     .then(|| InputMoments::new(spec.obs_dim + spec.act_dim)),
             },
-            model_opt: adam(&config.sac),
+            model_opt: adam(config.sac.adam_epsilon),
             model_learning_rate: config.model_learning_rate,
         }
     }
@@ -307,16 +306,13 @@ impl Agent for DelayedSac {
         let batch = &ctx.batch()?;
         let plain = self.learner.devices.plain.clone();
         let n = batch.len();
-        let tensors = transition_tensors(batch, &plain);
+        let tensors = TransitionTensors::new(batch, &plain);
+        let on_state = (tensors.state.clone(), tensors.next_state.clone());
 
         // SAC on the true, time-aligned (s, a, r, s').
         let mut stats = self
             .learner
-            .update(&SacBatch {
-                actor_input: tensors.critic_input.clone(),
-                next_actor_input: tensors.next_critic_input.clone(),
-                ..tensors.clone()
-            })
+            .update(&SacBatch::new(&tensors, on_state.clone(), on_state))
             .named();
 
         // The Δ-step errors, then one model step on L_f, after merging the batch's inputs into
@@ -334,7 +330,7 @@ impl Agent for DelayedSac {
         let predicted = self.model.predict(
             &self.model.network,
             self.model.normaliser(&plain).as_ref(),
-            tensors.critic_input.clone(),
+            tensors.state.clone(),
             tensors.action.clone(),
         );
         let loss = prediction_error(predicted, rows(batch.next_state.clone(), n, &plain));
@@ -353,28 +349,18 @@ impl Agent for DelayedSac {
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
         self.learner.save(dir, "")?;
-        let p = dir.join("model.bpk");
-        self.model
-            .network
-            .clone()
-            .save_file(&p)
-            .map_err(|e| save_error(&p, e))?;
-        let p = dir.join("model_adam.bpk");
-        self.model_opt.save(&p).map_err(|e| save_error(&p, e))?;
-        let p = dir.join("model_inputs.json");
-        let moments = serde_json::to_vec(&self.model.moments).map_err(|e| save_error(&p, e))?;
-        std::fs::write(&p, moments).map_err(|e| save_error(&p, e))
+        let files = CheckpointDir::new(dir);
+        files.save_module("model.bpk", &self.model.network)?;
+        files.save_optimizer("model_adam.bpk", &self.model_opt)?;
+        files.save_json("model_inputs.json", &self.model.moments)
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
         self.learner.load(dir, "")?;
-        let p = dir.join("model.bpk");
-        self.model.network = load_module(self.model.network.clone(), &p)?;
-        let p = dir.join("model_adam.bpk");
-        self.model_opt = load_optimizer(self.model_opt.clone(), &p)?;
-        let p = dir.join("model_inputs.json");
-        let bytes = std::fs::read(&p).map_err(|e| load_error(&p, e))?;
-        self.model.moments = serde_json::from_slice(&bytes).map_err(|e| load_error(&p, e))?;
+        let files = CheckpointDir::new(dir);
+        self.model.network = files.load_module("model.bpk", self.model.network.clone())?;
+        self.model_opt = files.load_optimizer("model_adam.bpk", self.model_opt.clone())?;
+        self.model.moments = files.load_json("model_inputs.json")?;
         Ok(())
     }
 }

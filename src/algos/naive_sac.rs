@@ -2,8 +2,9 @@
 //! `s_{t-Δ}` alone, ignoring the actions still in flight, and learns from
 //! `(s_{t-Δ}, a_t, r_t, s_{t-Δ+1})` as if that were an MDP — it is not, which is why it fails
 //! at long delays. Everything else is [`super::sac`]'s update.
+use super::agent::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo};
+use super::sac::Config as SacConfig;
 use super::sac::{InputView, SacAgent};
-use super::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig};
 use crate::learn::Devices;
 
 crate::algo_config! {
@@ -16,6 +17,7 @@ crate::algo_config! {
 impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo::single_learner(
         "naive-sac",
+        "Naive SAC",
         "SAC on the last received observation s_{t-Δ} only (memoryless)",
         false,
     );

@@ -1,130 +1,84 @@
-//! What ties an algorithm file to the rest of dhrl: its [`AlgoInfo`], its configuration (the
-//! `[algo]` table of `config.toml`, documented field by field) and its constructor, behind one
-//! object-safe [`Algorithm`] that the registry in `mod.rs` lists, one line per algorithm.
+//! The registry: one line per algorithm, and everything that lists algorithms (the names
+//! `--algo` accepts, the messages that name them) generated from it.
 use std::marker::PhantomData;
 
-use serde::{Serialize, de::DeserializeOwned};
-
-use super::{Agent, AgentSpec};
+use super::agent::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, FieldDoc, Role};
+use super::{augmented_sac, bpql, d2hpg, delayed_sac, naive_sac, sac, vdpo};
 use crate::learn::Devices;
 
-/// What is known of an algorithm before it is built.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct AlgoInfo {
-    /// The name `--algo` takes and `config.toml` records.
-    pub name: &'static str,
-    /// One line for `--help` and `--help-config`.
-    pub about: &'static str,
-    /// Whether the acting policy's input is the augmented state `x_t` (its size grows with Δ,
-    /// so the policy runs only at the delay it was trained with).
-    pub acts_on_augmented_state: bool,
-    /// Whether the agent also learns a policy on the true state that `dhrl eval
-    /// --delay-free-policy` evaluates undelayed ([`Agent::act_delay_free`]).
-    pub delay_free_policy: bool,
-    /// Whether the algorithm is a delay-free reference that runs with Δ = 0 only.
-    pub undelayed_only: bool,
-    /// Whether the algorithm needs a delay Δ ≥ 1 (its policy reads the Δ pending actions).
-    pub delayed_only: bool,
-    /// Learners updated side by side (rayon threads an update can use to advantage).
-    pub learner_threads: usize,
-    /// Fields shown in plot labels, with the symbol they are shown as (e.g. `λ`).
-    pub label_fields: &'static [(&'static str, &'static str)],
-}
+/// Every algorithm, one line each: the registry.
+pub static ALGORITHMS: &[&dyn Algorithm] = &[
+    &Registered::<sac::Config>::new(),
+    &Registered::<naive_sac::Config>::new(),
+    &Registered::<augmented_sac::Config>::new(),
+    &Registered::<delayed_sac::Config>::new(),
+    &Registered::<vdpo::Config>::new(),
+    &Registered::<bpql::Config>::new(),
+    &Registered::<d2hpg::NaiveConfig>::new(),
+    &Registered::<d2hpg::Config>::new(),
+];
 
-impl AlgoInfo {
-    /// An algorithm of one learner that runs under any delay and learns no delay-free policy.
-    pub const fn single_learner(
-        name: &'static str,
-        about: &'static str,
-        acts_on_augmented_state: bool,
-    ) -> AlgoInfo {
-        AlgoInfo {
-            name,
-            about,
-            acts_on_augmented_state,
-            delay_free_policy: false,
-            undelayed_only: false,
-            delayed_only: false,
-            learner_threads: 1,
-            label_fields: &[],
-        }
-    }
-}
-
-/// One documented field of an algorithm's configuration.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FieldDoc {
-    pub name: &'static str,
-    pub default: toml::Value,
-    pub doc: String,
-}
-
-/// What an algorithm's configuration is wrong about.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum AlgoError {
-    #[error("unknown algorithm `{name}`; the algorithms are: {valid}")]
-    UnknownAlgorithm { name: String, valid: String },
-    #[error(
-        "{algo} has no field `{field}`; its fields are: {valid} (`dhrl train --algo {algo} --help-config` describes them)"
-    )]
-    UnknownField {
-        algo: &'static str,
-        field: String,
-        valid: String,
-    },
-    #[error("[algo] of {algo}: {message}")]
-    BadValue { algo: &'static str, message: String },
-    #[error("{algo}: {what} must be {accepted}, got {value}")]
-    Invalid {
-        algo: &'static str,
-        what: &'static str,
-        accepted: &'static str,
-        value: String,
-    },
-    #[error("--set takes FIELD=VALUE (e.g. --set lifting_weight=10), got `{0}`")]
-    BadAssignment(String),
-    #[error(
-        "{0} is a delay-free reference and runs with Δ = 0; use augmented-sac, naive-sac, bpql or a D2HPG variant under a delay"
-    )]
-    UndelayedOnly(&'static str),
-    #[error(
-        "{0} reads the Δ pending actions of the augmented state and needs a delay of at least 1; use sac for Δ = 0"
-    )]
-    DelayedOnly(&'static str),
-}
-
-/// Checks one field: `Ok` when `ok`, else [`AlgoError::Invalid`].
-pub fn check(
-    ok: bool,
-    algo: &'static str,
-    what: &'static str,
-    accepted: &'static str,
-    value: impl ToString,
-) -> Result<(), AlgoError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(AlgoError::Invalid {
-            algo,
-            what,
-            accepted,
-            value: value.to_string(),
+/// The registered algorithm called `name`.
+pub fn algorithm(name: &str) -> Result<&'static dyn Algorithm, AlgoError> {
+    ALGORITHMS
+        .iter()
+        .copied()
+        .find(|a| a.info().name == name)
+        .ok_or_else(|| AlgoError::UnknownAlgorithm {
+            name: name.to_string(),
+            valid: names().join(", "),
         })
-    }
 }
 
-/// Field names and docs of a configuration struct (written by [`algo_config!`]).
-pub trait ConfigFields {
-    fn field_docs() -> Vec<FieldDoc>;
+/// The names `--algo` accepts, in registry order.
+pub fn names() -> Vec<&'static str> {
+    ALGORITHMS.iter().map(|a| a.info().name).collect()
 }
 
-/// An algorithm's configuration, the whole of what its file exports to the registry.
-pub trait AlgoConfig: ConfigFields + Serialize + DeserializeOwned + Default + 'static {
-    const INFO: AlgoInfo;
-    /// Checks every field, with errors that say what is accepted.
-    fn validate(&self) -> Result<(), AlgoError>;
-    /// The agent, for tasks of `spec`'s sizes, seeded with `seed`.
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent>;
+/// The names of the algorithms whose [`AlgoInfo`] passes `keep`, in registry order.
+pub fn names_where(keep: impl Fn(&AlgoInfo) -> bool) -> Vec<&'static str> {
+    ALGORITHMS
+        .iter()
+        .map(|a| a.info())
+        .filter(|info| keep(info))
+        .map(|info| info.name)
+        .collect()
+}
+
+/// The delay-free reference (the one algorithm of [`Role::Reference`]): the default algorithm,
+/// and the return every report score is a fraction of.
+pub fn reference() -> &'static AlgoInfo {
+    the_one(Role::Reference)
+}
+
+/// The paper's method (the one algorithm of [`Role::Proposed`]).
+pub fn proposed() -> &'static AlgoInfo {
+    the_one(Role::Proposed)
+}
+
+fn the_one(role: Role) -> &'static AlgoInfo {
+    let mut found = ALGORITHMS
+        .iter()
+        .map(|a| a.info())
+        .filter(|info| info.role == role);
+    let one = found
+        .next()
+        .expect("the registry has an algorithm of each role");
+    assert!(
+        found.next().is_none(),
+        "the registry has one {role:?} algorithm"
+    );
+    one
+}
+
+/// The paper's name of the algorithm called `name` (`name` itself for one not registered,
+/// such as a run folder from a newer dhrl).
+pub fn paper_name(name: &str) -> &str {
+    ALGORITHMS
+        .iter()
+        .map(|a| a.info())
+        .find(|info| info.name == name)
+        .map_or(name, |info| info.paper_name)
 }
 
 /// A registered algorithm, whatever its configuration type.
@@ -209,56 +163,156 @@ impl<C: AlgoConfig> Algorithm for Registered<C> {
     }
 }
 
-/// The TOML value of a field's default, for `--help-config`.
-pub fn toml_value(value: &impl Serialize) -> toml::Value {
-    toml::Value::try_from(value).expect("configuration fields are TOML values")
-}
+#[cfg(test)]
+mod tests {
+    use std::path::{Path, PathBuf};
 
-/// Declares an algorithm's configuration struct from its documented fields and defaults:
-/// the struct (serde, every field defaulted), its `Default`, and its [`ConfigFields`]. A
-/// leading `..name: Type;` embeds another configuration's fields flat (D2HPG's SAC fields).
-#[macro_export]
-macro_rules! algo_config {
-    (
-        $(#[$meta:meta])*
-        pub struct $name:ident {
-            $( ..$base:ident : $base_ty:ty ; )?
-            $( $(#[doc = $doc:literal])* pub $field:ident : $ty:ty = $default:expr, )*
-        }
-    ) => {
-        $(#[$meta])*
-        #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-        #[serde(default)]
-        pub struct $name {
-            $( #[serde(flatten)] pub $base: $base_ty, )?
-            $( $(#[doc = $doc])* pub $field: $ty, )*
-        }
+    use super::*;
 
-        impl Default for $name {
-            fn default() -> Self {
-                Self {
-                    $( $base: <$base_ty>::default(), )?
-                    $( $field: $default, )*
+    /// The string literals of Rust source `code`, comments skipped (raw strings too).
+    fn string_literals(code: &str) -> Vec<(usize, String)> {
+        let chars: Vec<char> = code.chars().collect();
+        let (mut out, mut i, mut line) = (Vec::new(), 0, 1);
+        while i < chars.len() {
+            match chars[i] {
+                '\n' => line += 1,
+                '/' if chars.get(i + 1) == Some(&'/') => {
+                    while i < chars.len() && chars[i] != '\n' {
+                        i += 1;
+                    }
+                    continue;
+                }
+                '\'' if chars.get(i + 2) == Some(&'\'') || chars.get(i + 1) == Some(&'\\') => {
+                    // A char literal ('"' among them), or a lifetime: skip its quote.
+                    i += if chars.get(i + 1) == Some(&'\\') {
+                        4
+                    } else {
+                        3
+                    };
+                    continue;
+                }
+                'r' if matches!(chars.get(i + 1), Some('"' | '#'))
+                    && !chars
+                        .get(i.wrapping_sub(1))
+                        .is_some_and(|c| c.is_alphanumeric()) =>
+                {
+                    let hashes = chars[i + 1..].iter().take_while(|&&c| c == '#').count();
+                    let start = i + 2 + hashes;
+                    let closing: Vec<char> = std::iter::once('"')
+                        .chain(std::iter::repeat_n('#', hashes))
+                        .collect();
+                    let mut end = start;
+                    while end < chars.len() && !chars[end..].starts_with(&closing) {
+                        end += 1;
+                    }
+                    let text: String = chars[start..end.min(chars.len())].iter().collect();
+                    out.push((line, text.clone()));
+                    line += text.matches('\n').count();
+                    i = end + closing.len();
+                    continue;
+                }
+                '"' => {
+                    let mut text = String::new();
+                    i += 1;
+                    while i < chars.len() && chars[i] != '"' {
+                        if chars[i] == '\\' {
+                            i += 1;
+                        }
+                        if chars.get(i) == Some(&'\n') {
+                            line += 1;
+                        }
+                        text.extend(chars.get(i));
+                        i += 1;
+                    }
+                    out.push((line, text));
+                }
+                _ => {}
+            }
+            i += 1;
+        }
+        out
+    }
+
+    fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                rust_files(&path, out);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                out.push(path);
+            }
+        }
+    }
+
+    /// Whether `name` occurs in `text` as a whole word: letters, digits, '-' and '_' continue a
+    /// word ("sac" is not in "naive-sac"), anything else ends one ("vdpo" is in "vdpo/belief").
+    fn mentions(text: &str, name: &str) -> bool {
+        let word = |c: char| c.is_alphanumeric() || c == '-' || c == '_';
+        text.match_indices(name).any(|(at, _)| {
+            !text[..at].chars().next_back().is_some_and(word)
+                && !text[at + name.len()..].chars().next().is_some_and(word)
+        })
+    }
+
+    /// Every list or message of algorithms is generated from the registry: no source file but
+    /// the algorithms' own writes an algorithm's name or paper name in a string.
+    #[test]
+    fn no_algorithm_name_is_written_outside_the_algorithm_files() {
+        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+        let mut files = Vec::new();
+        rust_files(&src, &mut files);
+        let own_files: Vec<&PathBuf> = files
+            .iter()
+            .filter(|p| {
+                p.starts_with(src.join("algos"))
+                    && std::fs::read_to_string(p)
+                        .unwrap()
+                        .contains("const INFO: AlgoInfo")
+            })
+            .collect();
+        assert!(
+            own_files.len() >= 6,
+            "found the algorithm files: {own_files:?}"
+        );
+        let words: Vec<&str> = ALGORITHMS
+            .iter()
+            .flat_map(|a| [a.info().name, a.info().paper_name])
+            .collect();
+        let mut found = Vec::new();
+        for path in files.iter().filter(|p| !own_files.contains(p)) {
+            let code = std::fs::read_to_string(path).unwrap();
+            for (line, literal) in string_literals(&code) {
+                for word in words.iter().filter(|w| mentions(&literal, w)) {
+                    found.push(format!(
+                        "{}:{line}: {word:?} in {literal:?}",
+                        path.display()
+                    ));
                 }
             }
         }
+        assert!(
+            found.is_empty(),
+            "algorithm names written by hand:\n{}",
+            found.join("\n")
+        );
+    }
 
-        impl $crate::algos::ConfigFields for $name {
-            fn field_docs() -> Vec<$crate::algos::FieldDoc> {
-                #[allow(unused_mut)]
-                let mut docs: Vec<$crate::algos::FieldDoc> = Vec::new();
-                $( docs.extend(<$base_ty as $crate::algos::ConfigFields>::field_docs()); )?
-                #[allow(unused_variables)]
-                let defaults = <Self as Default>::default();
-                $(
-                    docs.push($crate::algos::FieldDoc {
-                        name: stringify!($field),
-                        default: $crate::algos::toml_value(&defaults.$field),
-                        doc: [$($doc),*].iter().map(|line| line.trim()).collect::<Vec<_>>().join(" "),
-                    });
-                )*
-                docs
-            }
-        }
-    };
+    /// The scanner itself: it finds a name in a plain, a multi-line and a raw string, and
+    /// neither in comments nor inside a longer name.
+    #[test]
+    fn the_scanner_finds_names_in_strings_only() {
+        let code = "// \"bpql\" in a comment\nlet a = \"use bpql here\";\nlet c = '\"';\n\
+                    let b = r#\"raw \"d2hpg\"\"#;\nlet d = \"naive-sac\";\n";
+        let literals = string_literals(code);
+        let texts: Vec<&str> = literals.iter().map(|(_, t)| t.as_str()).collect();
+        assert_eq!(texts, ["use bpql here", "raw \"d2hpg\"", "naive-sac"]);
+        assert_eq!(literals[1].0, 4, "line numbers count from 1");
+        assert!(mentions("use bpql here", "bpql"));
+        assert!(mentions("raw \"d2hpg\"", "d2hpg"));
+        assert!(
+            !mentions("naive-sac", "sac"),
+            "a longer name is not the shorter one"
+        );
+        assert!(!mentions("d2hpg-naive", "d2hpg"));
+    }
 }

@@ -7,19 +7,19 @@
 //! BPQL and D2HPG reuse [`SacLearner`] for their delay-free parts.
 use std::path::Path;
 
-use burn::module::{Module, ModuleVisitor, Param};
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::module::Module;
+use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
-use burn::store::ModuleRecord;
-use burn::tensor::Bytes;
 
-use super::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, UpdateContext, check,
+use super::agent::{
+    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Role, Stats, check,
 };
+use super::context::UpdateContext;
 use crate::delay::{ReplayError, Transitions};
 use crate::learn::{
-    ActionScale, Devices, GaussianPolicy, LearnError, Noise, Temperature, TwinQ, actor_loss,
-    column, critic_loss, critic_target, matrix, polyak, squashed_sample, temperature_loss, to_vec,
+    ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, Temperature,
+    TransitionTensors, TwinQ, actor_loss, adam, critic_loss, critic_target, materialize, matrix,
+    polyak, rows, squashed_sample, temperature_loss, to_vec,
 };
 
 crate::algo_config! {
@@ -85,8 +85,10 @@ impl Config {
 impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo {
         undelayed_only: true,
+        role: Role::Reference,
         ..AlgoInfo::single_learner(
             "sac",
+            "Delay-free SAC",
             "delay-free SAC on the true state (Δ = 0 only): the upper reference",
             false,
         )
@@ -132,65 +134,6 @@ impl SacStats {
     }
 }
 
-/// Forces burn's lazily initialised parameters to draw their values now, in declaration
-/// order, so that a seed fixes them.
-pub(crate) fn materialize<M: Module>(module: &M) {
-    struct Touch;
-    impl ModuleVisitor for Touch {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            let _ = param.val();
-        }
-    }
-    module.visit(&mut Touch);
-}
-
-pub(crate) fn adam(hyper: &Config) -> ModuleOptimizer {
-    AdamConfig::new()
-        .with_epsilon(hyper.adam_epsilon as f32)
-        .init()
-}
-
-pub(crate) fn save_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
-    LearnError::Save {
-        what: what.display().to_string(),
-        message: e.to_string(),
-    }
-}
-
-pub(crate) fn load_error(what: &Path, e: impl std::fmt::Display) -> LearnError {
-    LearnError::Load {
-        what: what.display().to_string(),
-        message: e.to_string(),
-    }
-}
-
-/// Reads a saved file whole into memory. burn's own `load_file`s read tensors lazily, from the
-/// path, when a device first touches them: on wgpu that can come after the next checkpoint
-/// replaced the file (then it silently loads the wrong weights) or after the folder was removed
-/// (then burn's device thread panics). Loading from memory has neither window.
-fn read_whole(path: &Path) -> Result<Bytes, LearnError> {
-    let bytes = std::fs::read(path).map_err(|e| load_error(path, e))?;
-    Ok(Bytes::from_bytes_vec(bytes))
-}
-
-/// Restores a module saved with burn's `save_file`, read whole into memory first.
-pub(crate) fn load_module<M: Module>(module: M, path: &Path) -> Result<M, LearnError> {
-    let record = ModuleRecord::from_bytes(read_whole(path)?).map_err(|e| load_error(path, e))?;
-    module
-        .try_load_record(record)
-        .map_err(|e| load_error(path, e))
-}
-
-/// Restores an optimiser saved with [`ModuleOptimizer::save`], read whole into memory first.
-pub(crate) fn load_optimizer(
-    optimizer: ModuleOptimizer,
-    path: &Path,
-) -> Result<ModuleOptimizer, LearnError> {
-    optimizer
-        .from_bytes(read_whole(path)?)
-        .map_err(|e| load_error(path, e))
-}
-
 /// One SAC batch: what the actor and the critics condition on (the same for SAC itself; the
 /// augmented state for the actor and the true state for the critics in BPQL), now and next.
 /// All `[B, ·]` tensors on the plain device; `done` is 1 where the MDP terminated.
@@ -203,6 +146,26 @@ pub struct SacBatch {
     pub next_actor_input: Tensor<2>,
     pub next_critic_input: Tensor<2>,
     pub done: Tensor<2>,
+}
+
+impl SacBatch {
+    /// The actions, rewards and terminations of `t`, with the actor on `actor` and the critics
+    /// on `critic` (each `(now, next)`).
+    pub fn new(
+        t: &TransitionTensors,
+        (actor_input, next_actor_input): (Tensor<2>, Tensor<2>),
+        (critic_input, next_critic_input): (Tensor<2>, Tensor<2>),
+    ) -> SacBatch {
+        SacBatch {
+            actor_input,
+            critic_input,
+            action: t.action.clone(),
+            reward: t.reward.clone(),
+            next_actor_input,
+            next_critic_input,
+            done: t.done.clone(),
+        }
+    }
 }
 
 /// Adam learning rates of a [`SacLearner`]'s parts (all `learning_rate` unless an algorithm
@@ -255,9 +218,9 @@ impl SacLearner {
             actor,
             critic,
             temperature: Temperature::new(hyper.initial_alpha, &devices.train),
-            actor_opt: adam(hyper),
-            critic_opt: adam(hyper),
-            temperature_opt: adam(hyper),
+            actor_opt: adam(hyper.adam_epsilon),
+            critic_opt: adam(hyper.adam_epsilon),
+            temperature_opt: adam(hyper.adam_epsilon),
             scale: ActionScale::new(&spec.action_low, &spec.action_high, &devices.plain),
             hyper: hyper.clone(),
             rates: LearningRates {
@@ -433,92 +396,32 @@ impl SacLearner {
 
     /// Saves networks, optimiser states and the noise stream as `dir/{prefix}*.bpk|json`.
     pub fn save(&self, dir: &Path, prefix: &str) -> Result<(), LearnError> {
-        let path = |name: &str| dir.join(format!("{prefix}{name}"));
-        let p = path("actor.bpk");
-        self.actor
-            .clone()
-            .save_file(&p)
-            .map_err(|e| save_error(&p, e))?;
-        let p = path("critic.bpk");
-        self.critic
-            .clone()
-            .save_file(&p)
-            .map_err(|e| save_error(&p, e))?;
-        let p = path("critic_target.bpk");
-        self.target
-            .clone()
-            .save_file(&p)
-            .map_err(|e| save_error(&p, e))?;
-        let p = path("temperature.bpk");
-        self.temperature
-            .clone()
-            .save_file(&p)
-            .map_err(|e| save_error(&p, e))?;
-        for (name, opt) in [
-            ("actor_adam.bpk", &self.actor_opt),
-            ("critic_adam.bpk", &self.critic_opt),
-            ("temperature_adam.bpk", &self.temperature_opt),
-        ] {
-            let p = path(name);
-            opt.save(&p).map_err(|e| save_error(&p, e))?;
-        }
-        let p = path("noise.json");
-        let noise = serde_json::to_vec(&self.noise).map_err(|e| save_error(&p, e))?;
-        std::fs::write(&p, noise).map_err(|e| save_error(&p, e))
+        let files = CheckpointDir::with_prefix(dir, prefix);
+        files.save_module("actor.bpk", &self.actor)?;
+        files.save_module("critic.bpk", &self.critic)?;
+        files.save_module("critic_target.bpk", &self.target)?;
+        files.save_module("temperature.bpk", &self.temperature)?;
+        files.save_optimizer("actor_adam.bpk", &self.actor_opt)?;
+        files.save_optimizer("critic_adam.bpk", &self.critic_opt)?;
+        files.save_optimizer("temperature_adam.bpk", &self.temperature_opt)?;
+        files.save_json("noise.json", &self.noise)
     }
 
     /// Restores what [`SacLearner::save`] wrote with the same `prefix`.
     pub fn load(&mut self, dir: &Path, prefix: &str) -> Result<(), LearnError> {
-        let path = |name: &str| dir.join(format!("{prefix}{name}"));
-        let p = path("actor.bpk");
-        self.actor = load_module(self.actor.clone(), &p)?;
-        let p = path("critic.bpk");
-        self.critic = load_module(self.critic.clone(), &p)?;
-        let p = path("critic_target.bpk");
-        self.target = load_module(self.target.clone(), &p)?.valid();
-        let p = path("temperature.bpk");
-        self.temperature = load_module(self.temperature.clone(), &p)?;
-        for (name, opt) in [
-            ("actor_adam.bpk", &mut self.actor_opt),
-            ("critic_adam.bpk", &mut self.critic_opt),
-            ("temperature_adam.bpk", &mut self.temperature_opt),
-        ] {
-            let p = path(name);
-            *opt = load_optimizer(opt.clone(), &p)?;
-        }
-        let p = path("noise.json");
-        let bytes = std::fs::read(&p).map_err(|e| load_error(&p, e))?;
-        self.noise = serde_json::from_slice(&bytes).map_err(|e| load_error(&p, e))?;
+        let files = CheckpointDir::with_prefix(dir, prefix);
+        self.actor = files.load_module("actor.bpk", self.actor.clone())?;
+        self.critic = files.load_module("critic.bpk", self.critic.clone())?;
+        self.target = files
+            .load_module("critic_target.bpk", self.target.clone())?
+            .valid();
+        self.temperature = files.load_module("temperature.bpk", self.temperature.clone())?;
+        self.actor_opt = files.load_optimizer("actor_adam.bpk", self.actor_opt.clone())?;
+        self.critic_opt = files.load_optimizer("critic_adam.bpk", self.critic_opt.clone())?;
+        self.temperature_opt =
+            files.load_optimizer("temperature_adam.bpk", self.temperature_opt.clone())?;
+        self.noise = files.load_json("noise.json")?;
         Ok(())
-    }
-}
-
-/// `[rows, len / rows]` on `device`.
-pub(crate) fn rows(values: Vec<f32>, rows: usize, device: &Device) -> Tensor<2> {
-    let cols = values.len() / rows.max(1);
-    matrix(values, rows, cols, device)
-}
-
-/// A [`SacBatch`] of a batch of transitions: actions, rewards and terminations, with the
-/// actor on `x` and the critics on `s` (BPQL's split; the SAC baselines replace the inputs).
-pub(crate) fn transition_tensors(batch: &Transitions, device: &Device) -> SacBatch {
-    let n = batch.len();
-    let (augmented, state) = (
-        rows(batch.augmented.clone(), n, device),
-        rows(batch.state.clone(), n, device),
-    );
-    let (next_augmented, next_state) = (
-        rows(batch.next_augmented.clone(), n, device),
-        rows(batch.next_state.clone(), n, device),
-    );
-    SacBatch {
-        actor_input: augmented,
-        critic_input: state,
-        action: rows(batch.action.clone(), n, device),
-        reward: column(batch.reward.clone(), device),
-        next_actor_input: next_augmented,
-        next_critic_input: next_state,
-        done: column(batch.terminated.iter().map(|&d| d as f32).collect(), device),
     }
 }
 
@@ -622,13 +525,12 @@ impl Agent for SacAgent {
             rows(input, batch.len(), &plain),
             rows(next_input, batch.len(), &plain),
         );
-        let stats = self.learner.update(&SacBatch {
-            actor_input: input.clone(),
-            critic_input: input,
-            next_actor_input: next_input.clone(),
-            next_critic_input: next_input,
-            ..transition_tensors(batch, &plain)
-        });
+        let tensors = TransitionTensors::new(batch, &plain);
+        let stats = self.learner.update(&SacBatch::new(
+            &tensors,
+            (input.clone(), next_input.clone()),
+            (input, next_input),
+        ));
         Ok(stats.named())
     }
 

@@ -2,7 +2,8 @@
 //! configuration, resolved against the algorithm's defaults and checked.
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::{Agent, AgentSpec, AlgoError, AlgoInfo, Algorithm, FieldDoc, algorithm};
+use super::agent::{Agent, AgentSpec, AlgoError, AlgoInfo, FieldDoc};
+use super::registry::{Algorithm, algorithm};
 use crate::learn::Devices;
 
 /// An algorithm and its whole configuration (`name` plus every field, defaults filled in).
@@ -104,9 +105,9 @@ impl AlgoSettings {
 }
 
 impl Default for AlgoSettings {
-    /// Delay-free SAC with its defaults.
+    /// The delay-free reference with its defaults.
     fn default() -> AlgoSettings {
-        AlgoSettings::new("sac").expect("sac is registered")
+        AlgoSettings::new(super::registry::reference().name).expect("the reference is registered")
     }
 }
 
@@ -156,7 +157,7 @@ impl<'de> Deserialize<'de> for AlgoSettings {
                 _ => {
                     return Err(serde::de::Error::custom(format!(
                         "[algo] needs name = one of {}",
-                        super::names().join(", ")
+                        super::registry::names().join(", ")
                     )));
                 }
             },

@@ -1,10 +1,13 @@
 //! VDPO, Variational Delayed Policy Optimization (Wu et al., NeurIPS 2024), as its reference
-//! implementation (`QingyuanWuNothing/VDPO`) does it. Two steps alternate:
+//! implementation (`QingyuanWuNothing/VDPO`) does it. Each update takes three steps, numbered
+//! as [`Vdpo`]'s `update` numbers them:
 //!
 //! 1. TD learning in the delay-free problem: a SAC reference policy `π_ref(·|s_t)` on the true,
 //!    time-aligned states of the replay (critic every update at its own learning rate; actor and
 //!    temperature `actor_every` steps every `actor_every`-th update; targets every update).
-//! 2. Behaviour cloning: every `bc_every` environment steps, `bc_updates` updates of the delayed
+//! 2. The belief: the transformer's decoder reconstructs the Δ true states `s_{τ−Δ+1..τ}` from
+//!    `x_τ` (MSE), every update.
+//! 3. Behaviour cloning: every `bc_every` environment steps, `bc_updates` updates of the delayed
 //!    policy minimising `KL(π_Δ(·|x) ‖ π_ref(·|s))` on the Gaussians before the tanh squash.
 //!
 //! The delayed policy is a belief network over Δ tokens, token `i` built from
@@ -42,16 +45,14 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::sac::{
-    LearningRates, SacBatch, SacLearner, adam, load_error, load_module, load_optimizer,
-    materialize, rows, save_error, transition_tensors,
-};
-use super::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, SacConfig, Stats, UpdateContext,
-    check,
-};
+use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, check};
+use super::context::UpdateContext;
+use super::sac::{Config as SacConfig, LearningRates, SacBatch, SacLearner};
 use crate::delay::{BatchExtras, ReplayError};
-use crate::learn::{ActionScale, Devices, GaussianPolicy, LearnError, Noise, matrix, to_vec};
+use crate::learn::{
+    ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, TransitionTensors,
+    adam, materialize, matrix, rows, to_vec,
+};
 use crate::seeds;
 
 crate::algo_config! {
@@ -91,6 +92,7 @@ impl AlgoConfig for Config {
         delayed_only: true,
         ..AlgoInfo::single_learner(
             "vdpo",
+            "VDPO",
             "a delay-free SAC reference cloned into a transformer belief policy on x_t by KL",
             true,
         )
@@ -438,9 +440,9 @@ impl Vdpo {
             dropout: config.dropout,
             reference,
             belief,
-            belief_opt: adam(&config.sac),
+            belief_opt: adam(config.sac.adam_epsilon),
             policy_head,
-            policy_head_opt: adam(&config.sac),
+            policy_head_opt: adam(config.sac.adam_epsilon),
             scale: ActionScale::new(&spec.action_low, &spec.action_high, &devices.plain),
             devices: devices.clone(),
             schedule: Schedule {
@@ -585,15 +587,12 @@ impl Agent for Vdpo {
         let batch = ctx.batch()?;
         let plain = self.devices.plain.clone();
         let (n, obs, delay) = (batch.len(), self.spec.obs_dim, self.spec.delay);
-        let tensors = transition_tensors(&batch, &plain);
+        let tensors = TransitionTensors::new(&batch, &plain);
+        let on_state = (tensors.state.clone(), tensors.next_state.clone());
 
         // 1. The reference SAC on the true, time-aligned (s, a, r, s').
         let mut stats = self.update_reference(
-            &SacBatch {
-                actor_input: tensors.critic_input.clone(),
-                next_actor_input: tensors.next_critic_input.clone(),
-                ..tensors.clone()
-            },
+            &SacBatch::new(&tensors, on_state.clone(), on_state),
             ctx.updates,
         );
 
@@ -602,7 +601,7 @@ impl Agent for Vdpo {
             matrix(batch.intermediate_states, n * delay, obs, &plain).reshape([n, delay, obs]);
         stats.push((
             RECONSTRUCTION_STAT,
-            self.update_belief(tensors.actor_input, truth, ctx.updates),
+            self.update_belief(tensors.augmented, truth, ctx.updates),
         ));
 
         // 3. The cloning stage, on its schedule.
@@ -620,44 +619,23 @@ impl Agent for Vdpo {
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
         self.reference.save(dir, "reference_")?;
-        let p = dir.join("belief.bpk");
-        self.belief
-            .clone()
-            .save_file(&p)
-            .map_err(|e| save_error(&p, e))?;
-        let p = dir.join("policy_head.bpk");
-        self.policy_head
-            .clone()
-            .save_file(&p)
-            .map_err(|e| save_error(&p, e))?;
-        for (name, opt) in [
-            ("belief_adam.bpk", &self.belief_opt),
-            ("policy_head_adam.bpk", &self.policy_head_opt),
-        ] {
-            let p = dir.join(name);
-            opt.save(&p).map_err(|e| save_error(&p, e))?;
-        }
-        let p = dir.join("vdpo.json");
-        let schedule = serde_json::to_vec(&self.schedule).map_err(|e| save_error(&p, e))?;
-        std::fs::write(&p, schedule).map_err(|e| save_error(&p, e))
+        let files = CheckpointDir::new(dir);
+        files.save_module("belief.bpk", &self.belief)?;
+        files.save_module("policy_head.bpk", &self.policy_head)?;
+        files.save_optimizer("belief_adam.bpk", &self.belief_opt)?;
+        files.save_optimizer("policy_head_adam.bpk", &self.policy_head_opt)?;
+        files.save_json("vdpo.json", &self.schedule)
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
         self.reference.load(dir, "reference_")?;
-        let p = dir.join("belief.bpk");
-        self.belief = load_module(self.belief.clone(), &p)?;
-        let p = dir.join("policy_head.bpk");
-        self.policy_head = load_module(self.policy_head.clone(), &p)?;
-        for (name, opt) in [
-            ("belief_adam.bpk", &mut self.belief_opt),
-            ("policy_head_adam.bpk", &mut self.policy_head_opt),
-        ] {
-            let p = dir.join(name);
-            *opt = load_optimizer(opt.clone(), &p)?;
-        }
-        let p = dir.join("vdpo.json");
-        let bytes = std::fs::read(&p).map_err(|e| load_error(&p, e))?;
-        self.schedule = serde_json::from_slice(&bytes).map_err(|e| load_error(&p, e))?;
+        let files = CheckpointDir::new(dir);
+        self.belief = files.load_module("belief.bpk", self.belief.clone())?;
+        self.policy_head = files.load_module("policy_head.bpk", self.policy_head.clone())?;
+        self.belief_opt = files.load_optimizer("belief_adam.bpk", self.belief_opt.clone())?;
+        self.policy_head_opt =
+            files.load_optimizer("policy_head_adam.bpk", self.policy_head_opt.clone())?;
+        self.schedule = files.load_json("vdpo.json")?;
         Ok(())
     }
 }

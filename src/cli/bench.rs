@@ -2,7 +2,7 @@
 //! same run.
 use clap::{Args, Subcommand};
 
-use dhrl::algos::{AlgoSettings, names};
+use dhrl::algos::{AlgoSettings, names, reference};
 use dhrl::bench::{bench_delay, bench_env, bench_update};
 use dhrl::learn::LearnDevice;
 use dhrl::tasks::TaskName;
@@ -19,7 +19,7 @@ pub enum BenchCommand {
 
 #[derive(Args)]
 pub struct BenchUpdateArgs {
-    #[arg(long, default_value = "sac", value_parser = clap::builder::PossibleValuesParser::new(names()))]
+    #[arg(long, default_value_t = reference().name.to_string(), value_parser = clap::builder::PossibleValuesParser::new(names()))]
     algo: String,
     /// Set a field of the algorithm's configuration (repeatable), e.g. --set lifting_weight=10.
     #[arg(long = "set", value_name = "FIELD=VALUE")]

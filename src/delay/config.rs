@@ -8,8 +8,8 @@ pub const MAX_DELAY: usize = 64;
 ///
 /// Zeros by default: on InvertedPendulum a random warm-up ends 56% of the episodes at Δ = 5
 /// (88% at Δ = 10) before any policy acts, which caps every policy's mean return far below the
-/// paper's published ones; the paper group's BPQL code executes zeros (README, "Warm-up";
-/// `scripts/warmup_evidence.py`).
+/// paper's published ones; the paper group's BPQL code executes zeros
+/// (docs/results/warmup-evidence.md, `scripts/warmup_evidence.py`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum WarmupActions {
@@ -120,4 +120,21 @@ pub fn arrival_delay(seed: u64, copy: u32, episode: u32, tau: u32, bound: usize)
     x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     x ^= x >> 31;
     1 + (x % bound as u64) as usize
+}
+
+/// `Ok` when a buffer holds the `expected` number of values, else [`DelayError::WrongLength`].
+pub(super) fn check_len(
+    what: &'static str,
+    found: usize,
+    expected: usize,
+) -> Result<(), DelayError> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(DelayError::WrongLength {
+            what,
+            found,
+            expected,
+        })
+    }
 }

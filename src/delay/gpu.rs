@@ -7,10 +7,12 @@ use std::io::{Read, Write};
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-use super::cpu::{Transitions, check_len, transitions_from};
+use super::config::check_len;
+use super::cpu::transitions_from;
 use super::layer::{DelayLayer, LayerState, LayerStateMut, read_state, write_state};
 use super::layout::{CopyCounters, DelayLayout, RecordMeta};
 use super::records::{RecordBatch, StepInput};
+use super::transitions::Transitions;
 use super::warmup::WarmupFiller;
 use super::{DelayConfig, DelayError};
 use crate::sim::CopyStep;

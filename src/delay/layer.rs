@@ -1,27 +1,15 @@
 //! The delay layer as one interface over its two implementations, the CPU reference and the
-//! WGSL kernels, chosen by [`DelayDevice`]; both save the same checkpoint format, so a run's
-//! delay state moves between them.
+//! WGSL kernels (chosen by `DelayDevice`, in device.rs); both save the same checkpoint format,
+//! so a run's delay state moves between them.
 use std::io::{Read, Write};
 
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
 
+use super::DelayError;
 use super::layout::{CopyCounters, DelayLayout};
 use super::records::{RecordBatch, StepInput};
-use super::{CpuDelayLayer, DelayConfig, DelayError, GpuDelayLayer, Transitions};
+use super::transitions::Transitions;
 use crate::snapshot::{SnapshotError, read_section, write_section};
-
-/// Where the delay layer's ring buffers live.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum DelayDevice {
-    /// Host memory, updated by the CPU reference.
-    #[default]
-    Cpu,
-    /// `wgpu` storage buffers, updated by `shaders/delay.wgsl` (any Vulkan adapter, Mesa's
-    /// software one included), read back after every step.
-    Gpu,
-}
 
 /// What every implementation of the delay layer offers (SPEC §1).
 pub trait DelayLayer: Send {
@@ -44,32 +32,6 @@ pub trait DelayLayer: Send {
     fn save(&self, out: &mut dyn Write) -> Result<(), SnapshotError>;
     /// Restores what [`DelayLayer::save`] wrote, from either implementation.
     fn load(&mut self, input: &mut dyn Read) -> Result<(), SnapshotError>;
-}
-
-/// A delay layer on `device` for `copies` copies with the given observation size and bounds.
-pub fn delay_layer(
-    device: DelayDevice,
-    config: &DelayConfig,
-    copies: usize,
-    obs_dim: usize,
-    action_low: &[f64],
-    action_high: &[f64],
-    seed: u64,
-) -> Result<Box<dyn DelayLayer>, DelayError> {
-    Ok(match device {
-        DelayDevice::Cpu => Box::new(CpuDelayLayer::new(
-            config,
-            copies,
-            obs_dim,
-            action_low,
-            action_high,
-            seed,
-        )?),
-        DelayDevice::Gpu => Box::new(
-            GpuDelayLayer::new(config, copies, obs_dim, action_low, action_high, seed)
-                .map_err(|e| DelayError::Gpu(e.to_string()))?,
-        ),
-    })
 }
 
 /// A layer's whole state as host arrays: what a checkpoint holds, in this order.

@@ -11,21 +11,25 @@ mod args;
 mod batch;
 mod config;
 mod cpu;
+mod device;
 mod gpu;
 mod layer;
 mod layout;
 mod records;
 mod replay;
+mod transitions;
 mod warmup;
 
 pub use args::{DelayArgs, NegativeDelay};
 pub use batch::{BatchError, DelayedBatch};
 pub use config::{DelayConfig, DelayError, MAX_DELAY, WarmupActions, arrival_delay};
-pub use cpu::{BatchExtras, CpuDelayLayer, Transitions};
+pub use cpu::CpuDelayLayer;
+pub use device::{DelayDevice, delay_layer};
 pub use gpu::{GpuDelayLayer, GpuError};
-pub use layer::{DelayDevice, DelayLayer, delay_layer};
+pub use layer::DelayLayer;
 pub use layout::{
     CopyCounters, DelayLayout, RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED, RecordMeta,
 };
 pub use records::{RecordBatch, RecordRef, StepInput};
 pub use replay::{DEFAULT_CAPACITY, ReplayError, ReplayStore};
+pub use transitions::{BatchExtras, Transitions};

@@ -3,11 +3,11 @@
 //! step costs O(obs + act) floats instead of `2·(obs + Δ·act)`.
 use rand::Rng;
 
-use super::cpu::{BatchExtras, Transitions};
 use super::layout::{
     DelayLayout, RECORD_DIVERGED, RECORD_FINAL_STATE, RECORD_TERMINATED, RECORD_TRUNCATED,
 };
 use super::records::RecordBatch;
+use super::transitions::{BatchExtras, Transitions};
 use crate::snapshot::{SnapshotError, read_section, write_section};
 
 /// The default capacity, in steps (SPEC §3).

@@ -2,7 +2,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::cpu::check_len;
+use super::config::check_len;
 use super::{DelayError, WarmupActions};
 
 /// Draws warm-up actions for the copies that are not ready.

@@ -28,6 +28,16 @@ impl Devices {
             LearnDevice::Cpu => Device::flex(),
             #[cfg(feature = "wgpu-learner")]
             LearnDevice::Wgpu => {
+                // One command stream for every thread. A learner is used from several
+                // threads (D2HPG's two learners side by side under rayon::join, acting on the
+                // simulation pool, updates on the learner pool), and with CubeCL's default
+                // stream per thread a kernel could read a parameter another thread's stream
+                // had not finished writing: on an H200 D2HPG's delay-free α read back as 1.0
+                // instead of 0.2 on every run (and on lavapipe about one run in ten). One
+                // stream runs the kernels in the order they were submitted.
+                cubecl_environment::stream::set_policy(
+                    cubecl_environment::stream::StreamPolicy::Single,
+                );
                 let (real, all) = real_gpu_adapters();
                 if !real.is_empty() {
                     Device::wgpu(burn::prelude::DeviceKind::DefaultDevice)

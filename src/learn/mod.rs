@@ -3,6 +3,7 @@
 //! host-side noise so that runs are reproducible and resumable.
 
 mod device;
+mod io;
 mod losses;
 mod nets;
 mod noise;
@@ -11,18 +12,19 @@ mod tensors;
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
 pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};
+pub use io::CheckpointDir;
 pub use losses::{
     actor_loss, critic_loss, critic_target, lifting_loss, polyak, squashed_gaussian_log_prob,
     temperature_loss,
 };
 pub use nets::{
     ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, Mlp, MlpConfig, PolicySample,
-    QNetwork, Temperature, TwinQ, squashed_sample, squashed_samples_k,
+    QNetwork, Temperature, TwinQ, adam, materialize, squashed_sample, squashed_samples_k,
 };
 pub use noise::Noise;
 #[cfg(test)]
 pub(crate) use tensors::assert_close;
-pub use tensors::{column, matrix, to_vec};
+pub use tensors::{TransitionTensors, column, matrix, rows, to_vec};
 
 /// What can go wrong while learning, saving or loading.
 #[derive(Debug, thiserror::Error)]

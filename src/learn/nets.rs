@@ -1,7 +1,8 @@
 //! Networks: 256-256 ReLU MLPs, a tanh-squashed Gaussian policy, twin Q-networks and the
 //! learned temperature.
-use burn::module::Param;
+use burn::module::{ModuleVisitor, Param};
 use burn::nn::{Linear, LinearConfig};
+use burn::optim::{AdamConfig, ModuleOptimizer};
 use burn::prelude::*;
 use burn::tensor::activation::{relu, sigmoid};
 
@@ -265,4 +266,21 @@ impl Mlp {
             if i < last { relu(y) } else { y }
         })
     }
+}
+
+/// Forces burn's lazily initialised parameters to draw their values now, in declaration
+/// order, so that a seed fixes them.
+pub fn materialize<M: Module>(module: &M) {
+    struct Touch;
+    impl ModuleVisitor for Touch {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            let _ = param.val();
+        }
+    }
+    module.visit(&mut Touch);
+}
+
+/// Adam with the given ε (the optimiser of every learner).
+pub fn adam(epsilon: f64) -> ModuleOptimizer {
+    AdamConfig::new().with_epsilon(epsilon as f32).init()
 }

@@ -1,6 +1,8 @@
 //! Host arrays in and out of tensors.
 use burn::prelude::{Device, Tensor, TensorData};
 
+use crate::delay::Transitions;
+
 /// A `[rows, cols]` tensor from row-major values.
 pub fn matrix(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(values, [rows, cols]), device)
@@ -10,6 +12,46 @@ pub fn matrix(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Te
 pub fn column(values: Vec<f32>, device: &Device) -> Tensor<2> {
     let rows = values.len();
     matrix(values, rows, 1, device)
+}
+
+/// `[rows, len / rows]` on `device`.
+pub fn rows(values: Vec<f32>, rows: usize, device: &Device) -> Tensor<2> {
+    let cols = values.len() / rows.max(1);
+    matrix(values, rows, cols, device)
+}
+
+/// A batch of transitions as `[B, ·]` tensors; each algorithm chooses which of them its
+/// networks condition on.
+#[derive(Debug, Clone)]
+pub struct TransitionTensors {
+    /// `x_τ`
+    pub augmented: Tensor<2>,
+    /// `s_τ`
+    pub state: Tensor<2>,
+    pub action: Tensor<2>,
+    /// `[B, 1]`
+    pub reward: Tensor<2>,
+    /// `x_{τ+1}`
+    pub next_augmented: Tensor<2>,
+    /// `s_{τ+1}`
+    pub next_state: Tensor<2>,
+    /// `[B, 1]`: 1 where the MDP terminated.
+    pub done: Tensor<2>,
+}
+
+impl TransitionTensors {
+    pub fn new(batch: &Transitions, device: &Device) -> TransitionTensors {
+        let n = batch.len();
+        TransitionTensors {
+            augmented: rows(batch.augmented.clone(), n, device),
+            state: rows(batch.state.clone(), n, device),
+            action: rows(batch.action.clone(), n, device),
+            reward: column(batch.reward.clone(), device),
+            next_augmented: rows(batch.next_augmented.clone(), n, device),
+            next_state: rows(batch.next_state.clone(), n, device),
+            done: column(batch.terminated.iter().map(|&d| d as f32).collect(), device),
+        }
+    }
 }
 
 /// The values of a tensor, row-major.

@@ -8,8 +8,7 @@ use super::ReportError;
 use super::normalised;
 use super::results::RunResult;
 use super::stats::mean_std;
-use super::table::display_name;
-use crate::algos::names;
+use crate::algos::{Role, names, names_where, paper_name};
 use crate::charts::{CategorySeries, Labels, Line, category_chart, line_chart, svg_to_png};
 use crate::tasks::TaskName;
 use crate::train::{curve_summary, plot_curves};
@@ -66,7 +65,8 @@ fn learning_curves(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, Repor
                     })
                     .map(|r| (r.seed, r.evals.clone()))
                     .collect();
-                (!members.is_empty()).then(|| curve_summary(display_name(algorithm), &members))
+                (!members.is_empty())
+                    .then(|| curve_summary(paper_name(algorithm).to_string(), &members))
             })
             .collect();
         let title = format!("{} at Δ = {delay}", task.gymnasium_id());
@@ -125,7 +125,7 @@ fn noise(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
                 .collect();
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
             Line {
-                label: format!("{task} {} Δ={delay}", display_name(algorithm)),
+                label: format!("{task} {} Δ={delay}", paper_name(algorithm)),
                 points,
             }
         })
@@ -180,7 +180,7 @@ fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportEr
             series.push(CategorySeries {
                 label: format!(
                     "{} {}",
-                    display_name(algorithm),
+                    paper_name(algorithm),
                     if kind {
                         format!("random Δ in 1..={delay}")
                     } else {
@@ -202,12 +202,14 @@ fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportEr
     })
 }
 
-/// D2HPG-naive, BPQL and D2HPG per task and Δ, where D2HPG-naive ran.
+/// The lifting ablation's algorithms (`AlgoInfo::in_lifting_ablation`: D2HPG-naive, BPQL and
+/// D2HPG) per task and Δ, where the ablation-only one ran.
 fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
     let table: Vec<&RunResult> = runs.iter().filter(|r| r.condition.is_table1()).collect();
+    let ablation_only = names_where(|info| info.role == Role::Ablation);
     let cells: Vec<(TaskName, usize)> = table
         .iter()
-        .filter(|r| r.algorithm == "d2hpg-naive")
+        .filter(|r| ablation_only.contains(&r.algorithm))
         .map(|r| (r.task, r.condition.delay))
         .collect::<BTreeSet<_>>()
         .into_iter()
@@ -215,10 +217,10 @@ fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError>
     if cells.is_empty() {
         return Ok(Vec::new());
     }
-    let series: Vec<CategorySeries> = ["d2hpg-naive", "bpql", "d2hpg"]
+    let series: Vec<CategorySeries> = names_where(|info| info.in_lifting_ablation)
         .into_iter()
         .map(|algorithm| CategorySeries {
-            label: display_name(algorithm),
+            label: paper_name(algorithm).to_string(),
             values: cells
                 .iter()
                 .map(|&(task, delay)| {
@@ -236,7 +238,7 @@ fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError>
         .collect();
     let categories: Vec<String> = cells.iter().map(|(t, d)| format!("{t} Δ={d}")).collect();
     let labels = Labels {
-        title: "Ablation: lifting (D2HPG) against none (BPQL) and the naive abstraction",
+        title: "Ablation of the lifting loss: with it, without it, and the naive abstraction",
         x: "task and delay",
         y: "normalised return (mean over seeds ± std)",
     };
@@ -272,7 +274,10 @@ fn runtime(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> 
                 .collect(),
         })
         .collect();
-    let categories: Vec<String> = algorithms.iter().map(|a| display_name(a)).collect();
+    let categories: Vec<String> = algorithms
+        .iter()
+        .map(|a| paper_name(a).to_string())
+        .collect();
     let labels = Labels {
         title: "Wall-clock per 1M environment steps (this machine)",
         x: "algorithm",

@@ -18,9 +18,9 @@ mod table;
 
 pub use results::{Condition, RunResult, load_runs};
 pub use stats::{iqm, mean_std, probability_of_improvement};
-pub use table::{PaperCell, Table, display_name, paper_table1, table1};
+pub use table::{PaperCell, Table, paper_table1, table1};
 
-use crate::algos::names;
+use crate::algos::{names, paper_name, proposed, reference};
 use crate::sweep::write_atomically;
 use crate::tasks::TaskName;
 use stats::{Strata, bootstrap_interval, iqm_of_strata};
@@ -47,8 +47,8 @@ impl From<crate::train::ConfigError> for ReportError {
 pub fn normalised(task: TaskName, final_return: f64) -> f64 {
     let reference = paper_table1()
         .into_iter()
-        .find(|c| c.delay == 0 && c.algorithm == "sac" && c.task == task)
-        .expect("Table 1 has delay-free SAC on every task");
+        .find(|c| c.delay == 0 && c.algorithm == reference().name && c.task == task)
+        .expect("Table 1 has the delay-free reference on every task");
     final_return / reference.mean
 }
 
@@ -63,10 +63,12 @@ pub struct IqmRow {
     pub interval: (f64, f64),
 }
 
-/// The probability that D2HPG's final return beats a baseline's at a Δ.
+/// The probability that the paper's method's final return beats a baseline's at a Δ.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImprovementRow {
     pub delay: usize,
+    /// The paper's method (`algos::proposed`).
+    pub algorithm: &'static str,
     pub baseline: &'static str,
     pub probability: f64,
     pub interval: (f64, f64),
@@ -135,17 +137,19 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
                 }),
             });
         }
-        if !algorithms.contains(&"d2hpg") {
+        let proposed = proposed().name;
+        if !algorithms.contains(&proposed) {
             continue;
         }
-        let ours = strata(runs, "d2hpg", delay, &tasks);
+        let ours = strata(runs, proposed, delay, &tasks);
         for (k, &baseline) in algorithms.iter().enumerate() {
-            if baseline == "d2hpg" {
+            if baseline == proposed {
                 continue;
             }
             let theirs = strata(runs, baseline, delay, &tasks);
             improvements.push(ImprovementRow {
                 delay,
+                algorithm: proposed,
                 baseline,
                 probability: probability_of_improvement(&ours, &theirs),
                 interval: bootstrap_interval(
@@ -162,16 +166,17 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
 
 fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: usize) -> String {
     let mut out = format!(
-        "Normalised score: final return / the paper's delay-free SAC return on the task. IQM over \
+        "Normalised score: final return / the return of Table 1's {} on the task. IQM over \
          every run of the tasks listed; 95% stratified-bootstrap intervals ({reps} resamples).\n\n\
-         | Δ | algorithm | tasks | runs | IQM | 95% interval |\n|---|---|---|---:|---:|---|\n"
+         | Δ | algorithm | tasks | runs | IQM | 95% interval |\n|---|---|---|---:|---:|---|\n",
+        reference().paper_name
     );
     for row in iqms {
         let tasks: Vec<String> = row.tasks.iter().map(|t| t.to_string()).collect();
         out += &format!(
             "| {} | {} | {} | {} | {:.3} | [{:.3}, {:.3}] |\n",
             row.delay,
-            display_name(row.algorithm),
+            paper_name(row.algorithm),
             tasks.join(", "),
             row.runs,
             row.iqm,
@@ -179,14 +184,17 @@ fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: us
             row.interval.1
         );
     }
-    if !improvements.is_empty() {
-        out += "\n| Δ | P(D2HPG > baseline) | baseline | 95% interval |\n|---|---:|---|---|\n";
+    if let Some(first) = improvements.first() {
+        out += &format!(
+            "\n| Δ | P({} > baseline) | baseline | 95% interval |\n|---|---:|---|---|\n",
+            paper_name(first.algorithm)
+        );
         for row in improvements {
             out += &format!(
                 "| {} | {:.3} | {} | [{:.3}, {:.3}] |\n",
                 row.delay,
                 row.probability,
-                display_name(row.baseline),
+                paper_name(row.baseline),
                 row.interval.0,
                 row.interval.1
             );
@@ -205,8 +213,8 @@ fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
     }
     for r in improvements {
         out += &format!(
-            "probability_of_improvement,{},d2hpg,{},,{:.6},{:.6},{:.6}\n",
-            r.delay, r.baseline, r.probability, r.interval.0, r.interval.1
+            "probability_of_improvement,{},{},{},,{:.6},{:.6},{:.6}\n",
+            r.delay, r.algorithm, r.baseline, r.probability, r.interval.0, r.interval.1
         );
     }
     out

@@ -5,7 +5,7 @@ use std::collections::BTreeSet;
 
 use super::results::RunResult;
 use super::stats::mean_std;
-use crate::algos::names;
+use crate::algos::{names, paper_name};
 use crate::tasks::TaskName;
 
 /// The paper's Table 1 (arXiv source `delayed-homomorphic-rl.tex`, table `result-table`:
@@ -145,21 +145,6 @@ fn mark_best(rows: &mut Rows, tasks: usize) {
     }
 }
 
-/// The paper's name of an algorithm.
-pub fn display_name(algorithm: &str) -> String {
-    match algorithm {
-        "sac" => "Delay-free SAC".into(),
-        "naive-sac" => "Naive SAC".into(),
-        "augmented-sac" => "Augmented SAC".into(),
-        "delayed-sac" => "Delayed SAC".into(),
-        "vdpo" => "VDPO".into(),
-        "bpql" => "BPQL".into(),
-        "d2hpg-naive" => "D2HPG-naive".into(),
-        "d2hpg" => "D2HPG".into(),
-        other => other.into(),
-    }
-}
-
 fn delay_label(delay: usize) -> String {
     if delay == 0 {
         "–".into()
@@ -178,7 +163,7 @@ impl Table {
         out += &"---:|---:|".repeat(self.tasks.len());
         out += "\n";
         for (delay, algorithm, cells) in &self.rows {
-            out += &format!("| {} | {} |", delay_label(*delay), display_name(algorithm));
+            out += &format!("| {} | {} |", delay_label(*delay), paper_name(algorithm));
             for (ours, paper) in cells {
                 let ours = ours.as_ref().map_or("".into(), |c| {
                     let text = format!(
@@ -220,7 +205,7 @@ impl Table {
                 out += "\\hline\n";
             }
             previous = Some(*delay);
-            let name = display_name(algorithm).replace("D2HPG", "D$^2$HPG");
+            let name = latex_name(paper_name(algorithm));
             out += &format!("{} & {name}", delay_label(*delay).replace('–', "--"));
             for (ours, paper) in cells {
                 let bold = |text: String, best: bool| {
@@ -289,4 +274,9 @@ impl Table {
             })
             .collect()
     }
+}
+
+/// A paper name in LaTeX: the paper sets the "2" of "D2" as a superscript.
+fn latex_name(name: &str) -> String {
+    name.replacen("D2", "D$^2$", 1)
 }

@@ -27,7 +27,7 @@ pub struct CostRow {
 
 /// Times `updates` gradient updates (after one untimed) for every distinct (algorithm, task, Δ)
 /// among `runs`. Only the updates are counted: simulation and acting add a few percent at
-/// one update per step (see the README's throughput tables).
+/// one update per step (docs/experiments.md and docs/results/update-costs.md).
 pub fn estimate_cost(runs: &[&ManifestRun], updates: usize) -> Result<Vec<CostRow>, SweepError> {
     let mut rows: Vec<CostRow> = Vec::new();
     for run in runs {

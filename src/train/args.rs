@@ -18,6 +18,7 @@ fn algo_names() -> clap::builder::PossibleValuesParser {
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct TrainArgs {
+    /// The MuJoCo task (Gymnasium v4).
     #[arg(long, value_enum)]
     pub task: Option<TaskName>,
     /// The algorithm (`--help-config` lists its fields).
@@ -34,6 +35,8 @@ pub struct TrainArgs {
     /// Environment steps in total.
     #[arg(long)]
     pub steps: Option<u64>,
+    /// The run's seed: networks, exploration, environment copies and evaluations derive
+    /// their random streams from it.
     #[arg(long)]
     pub seed: Option<u64>,
     /// Copies collecting in parallel (1: the paper's protocol, one update per step).
@@ -45,12 +48,16 @@ pub struct TrainArgs {
     /// Uniform random steps before learning starts.
     #[arg(long)]
     pub warmup_steps: Option<u64>,
+    /// Environment steps between evaluations of the deterministic policy (one at the end too).
     #[arg(long)]
     pub eval_every: Option<u64>,
+    /// Episodes per evaluation, each on a fresh copy under the run's delay.
     #[arg(long)]
     pub eval_episodes: Option<usize>,
+    /// Environment steps between checkpoints (a run resumes from its last one).
     #[arg(long)]
     pub checkpoint_every: Option<u64>,
+    /// Transitions per gradient update, drawn uniformly from the replay.
     #[arg(long)]
     pub batch_size: Option<usize>,
     /// Initial entropy temperature α (--set initial_alpha=…).

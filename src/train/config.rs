@@ -2,7 +2,7 @@
 //! reads, and what the flags override.
 use serde::{Deserialize, Serialize};
 
-use crate::algos::{AlgoError, AlgoSettings, algorithm};
+use crate::algos::{AlgoError, AlgoSettings, algorithm, names_where, reference};
 use crate::delay::{DEFAULT_CAPACITY, DelayConfig, DelayDevice, DelayError};
 use crate::learn::LearnDevice;
 use crate::tasks::TaskName;
@@ -10,10 +10,13 @@ use crate::tasks::TaskName;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
+    /// The MuJoCo task.
     pub task: TaskName,
+    /// The delays, their warm-up actions and the actuator noise (`[delay]`).
     pub delay: DelayConfig,
     /// Environment steps in total (all copies together).
     pub steps: u64,
+    /// The run's seed, from which every random stream is derived.
     pub seed: u64,
     /// Copies collecting in parallel; 1 is the paper's protocol.
     pub envs: usize,
@@ -23,14 +26,19 @@ pub struct TrainConfig {
     pub warmup_steps: u64,
     /// Gradient updates per environment step.
     pub updates_per_step: f64,
+    /// Transitions per gradient update.
     pub batch_size: usize,
+    /// Steps the replay keeps (the oldest are overwritten).
     pub replay_capacity: usize,
+    /// Environment steps between evaluations.
     pub eval_every: u64,
+    /// Episodes per evaluation.
     pub eval_episodes: usize,
     /// Environment steps between checkpoints.
     pub checkpoint_every: u64,
     /// Gradient updates between rows of `train.csv`.
     pub log_every: u64,
+    /// Where the learners run.
     pub device: LearnDevice,
     /// Where the delay layer runs (training and evaluation copies).
     pub delay_device: DelayDevice,
@@ -79,6 +87,20 @@ pub enum ConfigError {
     NegativeDelay(#[from] crate::delay::NegativeDelay),
     #[error("cannot read config file {path}: {message}")]
     Read { path: String, message: String },
+    #[error(
+        "--delay-free-policy needs an algorithm that learns a delay-free policy ({learners}); {algo} learns none"
+    )]
+    NoDelayFreePolicy { algo: String, learners: String },
+}
+
+impl ConfigError {
+    /// `--delay-free-policy` asked of a run of `algo`, which learns none.
+    pub fn no_delay_free_policy(algo: &str) -> ConfigError {
+        ConfigError::NoDelayFreePolicy {
+            algo: algo.to_string(),
+            learners: names_where(|info| info.delay_free_policy).join(", "),
+        }
+    }
 }
 
 fn check(
@@ -121,10 +143,18 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<usize, ConfigError> {
         let delay = self.delay.total_delay()?;
         if self.algo.info().undelayed_only && delay > 0 {
-            return Err(AlgoError::UndelayedOnly(self.algo.name()).into());
+            return Err(AlgoError::UndelayedOnly {
+                algo: self.algo.name(),
+                delayed: names_where(|info| !info.undelayed_only).join(", "),
+            }
+            .into());
         }
         if self.algo.info().delayed_only && delay == 0 {
-            return Err(AlgoError::DelayedOnly(self.algo.name()).into());
+            return Err(AlgoError::DelayedOnly {
+                algo: self.algo.name(),
+                undelayed: names_where(|info| !info.delayed_only).join(", "),
+            }
+            .into());
         }
         check(self.steps > 0, "steps", "at least 1", self.steps)?;
         check(self.envs > 0, "envs", "at least 1", self.envs)?;
@@ -177,7 +207,8 @@ fn fold_legacy_algo_tables(table: &mut toml::Table) -> Result<(), ConfigError> {
         return Ok(());
     }
     let name = match table.get("algo") {
-        None => "sac".to_string(),
+        // Files of that age wrote no algorithm for the delay-free reference.
+        None => reference().name.to_string(),
         Some(toml::Value::String(name)) => name.clone(),
         Some(_) => {
             return Err(ConfigError::Invalid {

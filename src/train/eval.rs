@@ -64,11 +64,9 @@ pub fn evaluate(
             |inputs, rows| match policy {
                 EvalPolicy::Regular => Ok(agent.act(inputs, rows, ActMode::Deterministic)),
                 EvalPolicy::DelayFree => agent.act_delay_free(inputs, rows).ok_or_else(|| {
-                    TrainError::Config(super::ConfigError::Invalid {
-                        what: "the evaluated policy",
-                        accepted: "a delay-free policy, which only the D2HPG variants learn",
-                        value: "delay-free".into(),
-                    })
+                    TrainError::Config(super::ConfigError::no_delay_free_policy(
+                        "the evaluated agent",
+                    ))
                 }),
             },
         )?;

@@ -547,11 +547,9 @@ pub fn evaluate_saved(
     let total = eval_delay.total_delay()?;
     let info = config.algo.info();
     if delay_free_policy && !info.delay_free_policy {
-        return Err(TrainError::Config(ConfigError::Invalid {
-            what: "--delay-free-policy",
-            accepted: "a run of an algorithm that learns a delay-free policy (d2hpg, d2hpg-naive)",
-            value: config.algo.to_string(),
-        }));
+        return Err(TrainError::Config(ConfigError::no_delay_free_policy(
+            config.algo.name(),
+        )));
     }
     if !delay_free_policy && total != trained_delay && info.acts_on_augmented_state {
         return Err(TrainError::Config(ConfigError::Invalid {

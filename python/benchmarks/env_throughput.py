@@ -1,5 +1,5 @@
-"""``python -m dhrl.bench``: environment steps per second of ``dhrl.make_vec`` beside what a
-Python user runs today, measured in the same run on this machine: Gymnasium's
+"""``python/benchmarks/env_throughput.py``: environment steps per second of ``dhrl.make_vec``
+beside what a Python user runs today, measured in the same run on this machine: Gymnasium's
 ``SyncVectorEnv`` and ``AsyncVectorEnv`` of ``<Task>-v4`` wrapped in ``DelayObservation``, and
 EnvPool at Δ = 0 when it is installed. Random actions, uniform in the task's action bounds,
 resets included; every vector step counts ``num_envs`` environment steps.
@@ -13,6 +13,10 @@ Every column executes the same random actions: ``DelayObservation`` passes the a
 actions on from the first step, so dhrl's delayed env runs with ``warmup="random"`` (uniform
 in the bounds too) rather than its default zeros, which would change the physics being timed
 (a Humanoid given zero torques for Δ steps is a different, costlier contact problem).
+
+Run it from the repository root, with the built extension on the path:
+
+    PYTHONPATH=python .deps/venv/bin/python python/benchmarks/env_throughput.py --tasks all --envs 256
 """
 
 from __future__ import annotations
@@ -25,6 +29,9 @@ import time
 from typing import Callable
 
 import numpy as np
+from gymnasium import spaces
+
+from machine import cpu_model  # this folder's module (the script's folder is on sys.path)
 
 
 def measure(step: Callable[[np.ndarray], object], actions: np.ndarray, seconds: float) -> float:
@@ -114,17 +121,6 @@ def bench_envpool(gym_id: str, num_envs: int, threads: int, actions, seconds) ->
         env.close()
 
 
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as info:
-            for line in info:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
-
-
 def ratio(a: float | None, b: float | None) -> str:
     return f"{a / b:.2f}×" if a and b else "–"
 
@@ -134,7 +130,7 @@ def rate(value: float | None) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m dhrl.bench", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="env_throughput.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", default="HalfCheetah-v4,Humanoid-v4", help="comma-separated, or 'all'")
     parser.add_argument("--envs", default="1,16,256", help="comma-separated copy counts")
     parser.add_argument("--delay", type=int, default=20, help="the delayed configuration's Δ")
@@ -184,6 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         gym_id = dhrl.TASKS.get(task, task)
         for n in sizes:
             space = dhrl.make_vec(gym_id, 1).single_action_space
+            assert isinstance(space, spaces.Box)
             low, high = space.low, space.high
             actions = np.random.default_rng(0).uniform(low, high, (64, n, low.size)).astype(np.float32)
             row = {

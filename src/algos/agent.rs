@@ -1,0 +1,307 @@
+//! The contract between an algorithm file and the rest of dhrl: the [`Agent`] the training loop
+//! drives, the sizes it is built for, and the [`AlgoConfig`] its configuration implements (its
+//! [`AlgoInfo`], its documented fields, its constructor).
+use std::path::Path;
+
+use serde::{Serialize, de::DeserializeOwned};
+
+use super::context::UpdateContext;
+use crate::delay::{BatchExtras, ReplayError, Transitions};
+use crate::learn::{Devices, LearnError};
+use crate::sim::{SimError, TaskModel};
+use crate::tasks::TaskName;
+
+/// Sizes an agent is built for.
+#[derive(Debug, Clone)]
+pub struct AgentSpec {
+    pub obs_dim: usize,
+    pub act_dim: usize,
+    /// Total delay Δ: augmented states have `obs_dim + Δ·act_dim` entries.
+    pub delay: usize,
+    pub action_low: Vec<f64>,
+    pub action_high: Vec<f64>,
+}
+
+impl AgentSpec {
+    /// The sizes of a task's model under a total delay Δ.
+    pub fn for_model(model: &TaskModel, delay: usize) -> AgentSpec {
+        AgentSpec {
+            obs_dim: model.task.obs_dim,
+            act_dim: model.task.act_dim,
+            delay,
+            action_low: model.action_low.clone(),
+            action_high: model.action_high.clone(),
+        }
+    }
+
+    /// The sizes of `task` under a total delay Δ (loads its model for the action bounds).
+    pub fn for_task(task: TaskName, delay: usize) -> Result<AgentSpec, SimError> {
+        Ok(AgentSpec::for_model(&*TaskModel::load(task)?, delay))
+    }
+
+    pub fn augmented_dim(&self) -> usize {
+        self.obs_dim + self.delay * self.act_dim
+    }
+}
+
+/// How actions are chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ActMode {
+    /// Sampled from the policy (training).
+    Explore,
+    /// The policy's mode, `tanh` of the mean (evaluation).
+    Deterministic,
+}
+
+/// Named statistics of one update, a subset of the agent's [`Agent::stat_names`].
+pub type Stats = Vec<(&'static str, f64)>;
+
+/// What the training loop needs of an algorithm.
+pub trait Agent: Send {
+    /// Actions `[rows, act_dim]` for `rows` augmented states `[rows, obs + Δ·act]`.
+    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32>;
+    /// Deterministic actions of the delay-free policy for `rows` true states `[rows, obs]`,
+    /// evaluated undelayed; `None` unless [`AlgoInfo::delay_free_policy`] says there is one.
+    fn act_delay_free(&mut self, _states: &[f32], _rows: usize) -> Option<Vec<f32>> {
+        None
+    }
+    /// The statistics [`Agent::update`] may report, in `train.csv`'s column order.
+    fn stat_names(&self) -> Vec<&'static str>;
+    /// The optional batch fields the agent samples (none by default).
+    fn batch_extras(&self) -> BatchExtras {
+        BatchExtras::default()
+    }
+    /// One update of every learner: draws its batches from `ctx` (as many as it needs),
+    /// returns the statistics it computed this time (an absent one is logged empty).
+    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError>;
+    /// Networks, optimiser states and random streams, into `dir`.
+    fn save(&self, dir: &Path) -> Result<(), LearnError>;
+    /// Restores what [`Agent::save`] wrote.
+    fn load(&mut self, dir: &Path) -> Result<(), LearnError>;
+}
+
+/// `n` random transitions at `spec`'s sizes, with their intermediate states (values uniform
+/// in [−1, 1), every fifth one terminal): what update benchmarks and tests feed the learners, whose cost does not depend on
+/// the values.
+pub fn random_batch(spec: &AgentSpec, n: usize, seed: u64) -> Transitions {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut random = |len: usize| {
+        (0..len)
+            .map(|_| rng.random_range(-1.0f32..1.0))
+            .collect::<Vec<f32>>()
+    };
+    let (aug, obs, act) = (spec.augmented_dim(), spec.obs_dim, spec.act_dim);
+    Transitions {
+        copy: vec![0; n],
+        episode: vec![0; n],
+        tau: vec![0; n],
+        augmented: random(n * aug),
+        state: random(n * obs),
+        action: random(n * act),
+        reward: random(n),
+        next_augmented: random(n * aug),
+        next_state: random(n * obs),
+        terminated: (0..n).map(|i| u32::from(i % 5 == 0)).collect(),
+        intermediate_states: random(n * spec.delay * obs),
+    }
+}
+
+/// What is known of an algorithm before it is built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AlgoInfo {
+    /// The name `--algo` takes and `config.toml` records.
+    pub name: &'static str,
+    /// Its name in the paper's Table 1: report tables and figure legends.
+    pub paper_name: &'static str,
+    /// Its part in the paper's comparison.
+    pub role: Role,
+    /// Whether it is one of the lifting ablation's bars (the report's ablation figure).
+    pub in_lifting_ablation: bool,
+    /// One line for `--help` and `--help-config`.
+    pub about: &'static str,
+    /// Whether the acting policy's input is the augmented state `x_t` (its size grows with Δ,
+    /// so the policy runs only at the delay it was trained with).
+    pub acts_on_augmented_state: bool,
+    /// Whether the agent also learns a policy on the true state that `dhrl eval
+    /// --delay-free-policy` evaluates undelayed ([`Agent::act_delay_free`]).
+    pub delay_free_policy: bool,
+    /// Whether the algorithm is a delay-free reference that runs with Δ = 0 only.
+    pub undelayed_only: bool,
+    /// Whether the algorithm needs a delay Δ ≥ 1 (its policy reads the Δ pending actions).
+    pub delayed_only: bool,
+    /// Learners updated side by side (rayon threads an update can use to advantage).
+    pub learner_threads: usize,
+    /// Fields shown in plot labels, with the symbol they are shown as (e.g. `λ`).
+    pub label_fields: &'static [(&'static str, &'static str)],
+}
+
+impl AlgoInfo {
+    /// An algorithm of one learner that runs under any delay and learns no delay-free policy.
+    pub const fn single_learner(
+        name: &'static str,
+        paper_name: &'static str,
+        about: &'static str,
+        acts_on_augmented_state: bool,
+    ) -> AlgoInfo {
+        AlgoInfo {
+            name,
+            paper_name,
+            role: Role::Baseline,
+            in_lifting_ablation: false,
+            about,
+            acts_on_augmented_state,
+            delay_free_policy: false,
+            undelayed_only: false,
+            delayed_only: false,
+            learner_threads: 1,
+            label_fields: &[],
+        }
+    }
+}
+
+/// An algorithm's part in the paper's comparison (what the report does with its runs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// The delay-free reference whose Table 1 return normalises every score.
+    Reference,
+    /// A delayed baseline.
+    Baseline,
+    /// The paper's method: the report's probability of improvement is its, over each baseline.
+    Proposed,
+    /// Run for the lifting ablation only.
+    Ablation,
+}
+
+/// One documented field of an algorithm's configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldDoc {
+    pub name: &'static str,
+    pub default: toml::Value,
+    pub doc: String,
+}
+
+/// What an algorithm's configuration is wrong about.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum AlgoError {
+    #[error("unknown algorithm `{name}`; the algorithms are: {valid}")]
+    UnknownAlgorithm { name: String, valid: String },
+    #[error(
+        "{algo} has no field `{field}`; its fields are: {valid} (`dhrl train --algo {algo} --help-config` describes them)"
+    )]
+    UnknownField {
+        algo: &'static str,
+        field: String,
+        valid: String,
+    },
+    #[error("[algo] of {algo}: {message}")]
+    BadValue { algo: &'static str, message: String },
+    #[error("{algo}: {what} must be {accepted}, got {value}")]
+    Invalid {
+        algo: &'static str,
+        what: &'static str,
+        accepted: &'static str,
+        value: String,
+    },
+    #[error("--set takes FIELD=VALUE (e.g. --set lifting_weight=10), got `{0}`")]
+    BadAssignment(String),
+    #[error(
+        "{algo} is a delay-free reference and runs with Δ = 0; under a delay use one of: {delayed}"
+    )]
+    UndelayedOnly { algo: &'static str, delayed: String },
+    #[error(
+        "{algo} reads the Δ pending actions of the augmented state and needs a delay of at least 1; for Δ = 0 use one of: {undelayed}"
+    )]
+    DelayedOnly {
+        algo: &'static str,
+        undelayed: String,
+    },
+}
+
+/// Checks one field: `Ok` when `ok`, else [`AlgoError::Invalid`].
+pub fn check(
+    ok: bool,
+    algo: &'static str,
+    what: &'static str,
+    accepted: &'static str,
+    value: impl ToString,
+) -> Result<(), AlgoError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(AlgoError::Invalid {
+            algo,
+            what,
+            accepted,
+            value: value.to_string(),
+        })
+    }
+}
+
+/// Field names and docs of a configuration struct (written by [`algo_config!`]).
+pub trait ConfigFields {
+    fn field_docs() -> Vec<FieldDoc>;
+}
+
+/// An algorithm's configuration, the whole of what its file exports to the registry.
+pub trait AlgoConfig: ConfigFields + Serialize + DeserializeOwned + Default + 'static {
+    const INFO: AlgoInfo;
+    /// Checks every field, with errors that say what is accepted.
+    fn validate(&self) -> Result<(), AlgoError>;
+    /// The agent, for tasks of `spec`'s sizes, seeded with `seed`.
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent>;
+}
+
+/// The TOML value of a field's default, for `--help-config`.
+pub fn toml_value(value: &impl Serialize) -> toml::Value {
+    toml::Value::try_from(value).expect("configuration fields are TOML values")
+}
+
+/// Declares an algorithm's configuration struct from its documented fields and defaults:
+/// the struct (serde, every field defaulted), its `Default`, and its [`ConfigFields`]. A
+/// leading `..name: Type;` embeds another configuration's fields flat (D2HPG's SAC fields).
+#[macro_export]
+macro_rules! algo_config {
+    (
+        $(#[$meta:meta])*
+        pub struct $name:ident {
+            $( ..$base:ident : $base_ty:ty ; )?
+            $( $(#[doc = $doc:literal])* pub $field:ident : $ty:ty = $default:expr, )*
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+        #[serde(default)]
+        pub struct $name {
+            $( #[serde(flatten)] pub $base: $base_ty, )?
+            $( $(#[doc = $doc])* pub $field: $ty, )*
+        }
+
+        impl Default for $name {
+            fn default() -> Self {
+                Self {
+                    $( $base: <$base_ty>::default(), )?
+                    $( $field: $default, )*
+                }
+            }
+        }
+
+        impl $crate::algos::ConfigFields for $name {
+            fn field_docs() -> Vec<$crate::algos::FieldDoc> {
+                #[allow(unused_mut)]
+                let mut docs: Vec<$crate::algos::FieldDoc> = Vec::new();
+                $( docs.extend(<$base_ty as $crate::algos::ConfigFields>::field_docs()); )?
+                #[allow(unused_variables)]
+                let defaults = <Self as Default>::default();
+                $(
+                    docs.push($crate::algos::FieldDoc {
+                        name: stringify!($field),
+                        default: $crate::algos::toml_value(&defaults.$field),
+                        doc: [$($doc),*].iter().map(|line| line.trim()).collect::<Vec<_>>().join(" "),
+                    });
+                )*
+                docs
+            }
+        }
+    };
+}
