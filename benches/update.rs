@@ -19,7 +19,7 @@ fn updates(c: &mut Criterion) {
     ] {
         let algo = AlgoSettings::new(name).unwrap();
         let spec = AgentSpec::for_task(TaskName::HalfCheetah, delay).unwrap();
-        let mut agent = algo.build(&spec, &devices, 0).unwrap();
+        let mut agent = algo.build(&spec, &devices, 0);
         let pool = learner_pool(algo.info().learner_threads).unwrap();
         let data = random_batch(&spec, 256, 0);
         group.bench_function(format!("{name} Δ={delay}"), |b| {

@@ -67,6 +67,9 @@ for test in tests/*.rs; do
 done
 cargo test --release --features wgpu-learner --doc "$@"
 stage_done "doc tests"
+# The workspace's own crates: the charts, and finite-domain DHRL (`dhrl tabular`).
+cargo test --release -p dhrl-charts -p dhrl-tabular "$@"
+stage_done "crates/ (dhrl-charts, dhrl-tabular)"
 # The Python package (python/): its extension built from the same compiled tree (the same
 # features, so nothing is built twice), put beside its sources as `maturin develop` would,
 # and its pytest suite run in the venv against Gymnasium and the `dhrl` binary.

@@ -363,7 +363,7 @@ pub fn bench_update(
     use crate::algos::{AgentSpec, UpdateContext, random_batch};
     let spec = AgentSpec::for_task(task, delay)?;
     let devices = crate::learn::Devices::new(device)?;
-    let mut agent = algo.build(&spec, &devices, 0)?;
+    let mut agent = algo.build(&spec, &devices, 0);
     let batch = random_batch(&spec, batch_size, 1);
     let threads = threads.unwrap_or(algo.info().learner_threads);
     let pool = crate::train::learner_pool(threads)?;

@@ -1,7 +1,6 @@
 //! dhrl: delayed homomorphic reinforcement learning on batched MuJoCo tasks.
 pub mod algos;
 pub mod bench;
-pub mod charts;
 pub mod delay;
 pub mod float_mode;
 pub mod learn;
@@ -11,6 +10,10 @@ pub mod seeds;
 pub mod sim;
 pub mod snapshot;
 pub mod sweep;
-pub mod tabular;
 pub mod tasks;
 pub mod train;
+
+/// The charts, from the workspace crate `dhrl-charts`.
+pub use dhrl_charts as charts;
+/// Finite-domain DHRL (`dhrl tabular`), from the workspace crate `dhrl-tabular`.
+pub use dhrl_tabular as tabular;

@@ -39,7 +39,7 @@ fn a_loaded_agent_is_unaffected_by_its_folder_being_replaced_or_removed() {
             action_low: vec![-1.0, -2.0],
             action_high: vec![1.0, 2.0],
         };
-        let mut original = settings.build(&spec, &devices, 7).unwrap();
+        let mut original = settings.build(&spec, &devices, 7);
         for k in 1..=3 {
             advance(original.as_mut(), &spec, k);
         }
@@ -47,14 +47,10 @@ fn a_loaded_agent_is_unaffected_by_its_folder_being_replaced_or_removed() {
         let saved = folder.path().join("checkpoint");
         std::fs::create_dir(&saved).unwrap();
         original.save(&saved).unwrap();
-        let mut loaded = settings.build(&spec, &devices, 8).unwrap();
+        let mut loaded = settings.build(&spec, &devices, 8);
         loaded.load(&saved).unwrap();
         // The next checkpoint replaces every file (another agent's), then the folder goes.
-        settings
-            .build(&spec, &devices, 9)
-            .unwrap()
-            .save(&saved)
-            .unwrap();
+        settings.build(&spec, &devices, 9).save(&saved).unwrap();
         std::fs::remove_dir_all(&saved).unwrap();
         for k in 4..=6 {
             assert_eq!(

@@ -85,8 +85,8 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
             settings.set("dropout=0.0").unwrap();
         }
         let spec = spec(if settings.info().undelayed_only { 0 } else { 3 });
-        let mut on_cpu = settings.build(&spec, &cpu, 7).unwrap();
-        let mut on_gpu = settings.build(&spec, &gpu, 7).unwrap();
+        let mut on_cpu = settings.build(&spec, &cpu, 7);
+        let mut on_gpu = settings.build(&spec, &gpu, 7);
         let saved = tempfile::tempdir().unwrap();
         on_cpu.save(saved.path()).unwrap();
         on_gpu.load(saved.path()).unwrap();
@@ -134,7 +134,7 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
         // Saved on wgpu, loaded on the CPU: the same policy.
         let from_gpu = tempfile::tempdir().unwrap();
         on_gpu.save(from_gpu.path()).unwrap();
-        let mut reloaded = settings.build(&spec, &cpu, 8).unwrap();
+        let mut reloaded = settings.build(&spec, &cpu, 8);
         reloaded.load(from_gpu.path()).unwrap();
         let (a, b) = (
             on_gpu.act(&probe.augmented, 16, ActMode::Deterministic),

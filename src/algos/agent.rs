@@ -244,7 +244,9 @@ pub trait ConfigFields {
 }
 
 /// An algorithm's configuration, the whole of what its file exports to the registry.
-pub trait AlgoConfig: ConfigFields + Serialize + DeserializeOwned + Default + 'static {
+pub trait AlgoConfig:
+    ConfigFields + Serialize + DeserializeOwned + Default + Clone + Send + Sync + 'static
+{
     const INFO: AlgoInfo;
     /// Checks every field, with errors that say what is accepted.
     fn validate(&self) -> Result<(), AlgoError>;

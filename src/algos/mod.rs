@@ -26,10 +26,10 @@ pub use bpql::Bpql;
 pub use context::UpdateContext;
 pub use d2hpg::{Config as D2hpgConfig, D2hpg, Regular};
 pub use registry::{
-    ALGORITHMS, Algorithm, Registered, algorithm, names, names_where, paper_name, proposed,
-    reference,
+    ALGORITHMS, Algorithm, AnyConfig, Registered, algorithm, names, names_where, paper_name,
+    proposed, reference,
 };
 pub use sac::{
     Config as SacConfig, InputView, LearningRates, SacAgent, SacBatch, SacLearner, SacStats,
 };
-pub use settings::AlgoSettings;
+pub use settings::{AlgoSettings, parse_assignment};

@@ -3,14 +3,12 @@
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use super::agent::{Agent, AgentSpec, AlgoError, AlgoInfo, FieldDoc};
-use super::registry::{Algorithm, algorithm};
+use super::registry::{AnyConfig, algorithm};
 use crate::learn::Devices;
 
-/// An algorithm and its whole configuration (`name` plus every field, defaults filled in).
-#[derive(Clone)]
+/// An algorithm and its whole configuration, typed (defaults filled in, every field checked).
 pub struct AlgoSettings {
-    algorithm: &'static dyn Algorithm,
-    fields: toml::Table,
+    config: Box<dyn AnyConfig>,
 }
 
 impl AlgoSettings {
@@ -19,12 +17,10 @@ impl AlgoSettings {
         AlgoSettings::with_fields(name, &toml::Table::new())
     }
 
-    /// `name` with the given fields over its defaults.
+    /// `name` with the given fields over its defaults: the one place a configuration is read.
     pub fn with_fields(name: &str, given: &toml::Table) -> Result<AlgoSettings, AlgoError> {
-        let algorithm = algorithm(name)?;
         Ok(AlgoSettings {
-            fields: algorithm.resolve(given)?,
-            algorithm,
+            config: algorithm(name)?.parse(given)?,
         })
     }
 
@@ -33,58 +29,49 @@ impl AlgoSettings {
     }
 
     pub fn info(&self) -> &'static AlgoInfo {
-        self.algorithm.info()
+        self.config.info()
     }
 
-    /// The resolved fields (without `name`).
-    pub fn fields(&self) -> &toml::Table {
-        &self.fields
+    /// Every field as TOML (without `name`).
+    pub fn fields(&self) -> toml::Table {
+        self.config.table()
     }
 
     /// The fields of this algorithm with their defaults and docs.
     pub fn field_docs(&self) -> Vec<FieldDoc> {
-        self.algorithm.field_docs()
+        algorithm(self.name())
+            .expect("a configuration's algorithm is registered")
+            .field_docs()
+    }
+
+    /// `values` over these settings, read once: under `algorithm` when given (keeping the
+    /// fields it shares with this one, the rest at its defaults), else under this one.
+    pub fn with(
+        &self,
+        algorithm_name: Option<&str>,
+        values: &toml::Table,
+    ) -> Result<AlgoSettings, AlgoError> {
+        let target = algorithm(algorithm_name.unwrap_or(self.name()))?;
+        let docs = target.field_docs();
+        let mut given: toml::Table = self
+            .fields()
+            .into_iter()
+            .filter(|(k, _)| docs.iter().any(|d| d.name == k.as_str()))
+            .collect();
+        given.extend(values.iter().map(|(k, v)| (k.clone(), v.clone())));
+        AlgoSettings::with_fields(target.info().name, &given)
     }
 
     /// Overrides one field from `FIELD=VALUE` (VALUE in TOML syntax; a bare word is a string).
     pub fn set(&mut self, assignment: &str) -> Result<(), AlgoError> {
-        let (field, value) = assignment
-            .split_once('=')
-            .map(|(f, v)| (f.trim(), v.trim()))
-            .filter(|(f, v)| !f.is_empty() && !v.is_empty())
-            .ok_or_else(|| AlgoError::BadAssignment(assignment.to_string()))?;
-        let value = format!("value = {value}")
-            .parse::<toml::Table>()
-            .ok()
-            .and_then(|mut t| t.remove("value"))
-            .unwrap_or_else(|| toml::Value::String(value.to_string()));
-        let mut given = self.fields.clone();
-        given.insert(field.to_string(), value);
-        self.fields = self.algorithm.resolve(&given)?;
+        let (field, value) = parse_assignment(assignment)?;
+        *self = self.with(None, &toml::Table::from_iter([(field, value)]))?;
         Ok(())
     }
 
-    /// The same fields under another algorithm: those it shares are kept, the rest default.
-    pub fn switch_to(&self, name: &str) -> Result<AlgoSettings, AlgoError> {
-        let target = algorithm(name)?;
-        let names: Vec<&str> = target.field_docs().iter().map(|d| d.name).collect();
-        let shared = self
-            .fields
-            .iter()
-            .filter(|(k, _)| names.iter().any(|name| *name == k.as_str()))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-        AlgoSettings::with_fields(name, &shared)
-    }
-
     /// The agent, for tasks of `spec`'s sizes, seeded with `seed`.
-    pub fn build(
-        &self,
-        spec: &AgentSpec,
-        devices: &Devices,
-        seed: u64,
-    ) -> Result<Box<dyn Agent>, AlgoError> {
-        self.algorithm.build(&self.fields, spec, devices, seed)
+    pub fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        self.config.build(spec, devices, seed)
     }
 
     /// `--help-config`: every field with its default and its doc.
@@ -111,9 +98,32 @@ impl Default for AlgoSettings {
     }
 }
 
+/// `FIELD=VALUE` (`--set`) as a field name and its TOML value (a bare word is a string).
+pub fn parse_assignment(assignment: &str) -> Result<(String, toml::Value), AlgoError> {
+    let (field, value) = assignment
+        .split_once('=')
+        .map(|(f, v)| (f.trim(), v.trim()))
+        .filter(|(f, v)| !f.is_empty() && !v.is_empty())
+        .ok_or_else(|| AlgoError::BadAssignment(assignment.to_string()))?;
+    let value = format!("value = {value}")
+        .parse::<toml::Table>()
+        .ok()
+        .and_then(|mut t| t.remove("value"))
+        .unwrap_or_else(|| toml::Value::String(value.to_string()));
+    Ok((field.to_string(), value))
+}
+
+impl Clone for AlgoSettings {
+    fn clone(&self) -> AlgoSettings {
+        AlgoSettings {
+            config: self.config.boxed_clone(),
+        }
+    }
+}
+
 impl PartialEq for AlgoSettings {
     fn eq(&self, other: &AlgoSettings) -> bool {
-        self.name() == other.name() && self.fields == other.fields
+        self.name() == other.name() && self.fields() == other.fields()
     }
 }
 
@@ -121,7 +131,7 @@ impl std::fmt::Debug for AlgoSettings {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("AlgoSettings")
             .field("name", &self.name())
-            .field("fields", &self.fields)
+            .field("fields", &self.fields())
             .finish()
     }
 }
@@ -136,7 +146,7 @@ impl Serialize for AlgoSettings {
     fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         let mut table = toml::Table::new();
         table.insert("name".into(), toml::Value::String(self.name().into()));
-        table.extend(self.fields.clone());
+        table.extend(self.fields());
         table.serialize(serializer)
     }
 }
@@ -163,5 +173,66 @@ impl<'de> Deserialize<'de> for AlgoSettings {
             },
         };
         result.map_err(serde::de::Error::custom)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table(text: &str) -> toml::Table {
+        text.parse().unwrap()
+    }
+
+    /// Switching algorithms keeps the fields both have and defaults the rest; values given
+    /// with the switch go over both; a field the target lacks is refused by name.
+    #[test]
+    fn settings_switch_algorithms_keeping_the_shared_fields() {
+        let d2hpg = AlgoSettings::with_fields("d2hpg", &table("lifting_weight = 3.0\ngamma = 0.9"))
+            .unwrap();
+        let naive = d2hpg
+            .with(Some("d2hpg-naive"), &table("tau = 0.01"))
+            .unwrap();
+        assert_eq!(naive.name(), "d2hpg-naive");
+        let fields = naive.fields();
+        assert_eq!(fields["lifting_weight"].as_float(), Some(3.0));
+        assert_eq!(fields["gamma"].as_float(), Some(0.9));
+        assert_eq!(fields["tau"].as_float(), Some(0.01));
+        let bpql = d2hpg.with(Some("bpql"), &toml::Table::new()).unwrap();
+        assert_eq!(bpql.fields()["gamma"].as_float(), Some(0.9));
+        assert!(!bpql.fields().contains_key("lifting_weight"));
+        let refused = d2hpg.with(Some("bpql"), &table("lifting_samples = 4"));
+        assert!(
+            matches!(&refused, Err(AlgoError::UnknownField { field, .. }) if field == "lifting_samples"),
+            "{:?}",
+            refused.err()
+        );
+        // Unchanged by the failed switch, and equal to its own round trip through TOML.
+        assert_eq!(
+            d2hpg,
+            AlgoSettings::with_fields("d2hpg", &d2hpg.fields()).unwrap()
+        );
+    }
+
+    #[test]
+    fn assignments_parse_to_typed_values() {
+        let parsed = |text| parse_assignment(text).unwrap();
+        assert_eq!(parsed("tau=0.01"), ("tau".into(), toml::Value::Float(0.01)));
+        assert_eq!(
+            parsed(" lifting_samples = 4 "),
+            ("lifting_samples".into(), toml::Value::Integer(4))
+        );
+        assert_eq!(
+            parsed("model_output=difference").1,
+            toml::Value::String("difference".into())
+        );
+        assert!(matches!(
+            parse_assignment("tau"),
+            Err(AlgoError::BadAssignment(_))
+        ));
+        assert!(matches!(
+            parse_assignment("=3"),
+            Err(AlgoError::BadAssignment(_))
+        ));
     }
 }

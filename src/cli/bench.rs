@@ -2,7 +2,7 @@
 //! same run.
 use clap::{Args, Subcommand};
 
-use dhrl::algos::{AlgoSettings, names, reference};
+use dhrl::algos::{AlgoSettings, names, parse_assignment, reference};
 use dhrl::bench::{bench_delay, bench_env, bench_update};
 use dhrl::learn::LearnDevice;
 use dhrl::tasks::TaskName;
@@ -104,18 +104,21 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<()> {
 }
 
 fn run_bench_update(args: &BenchUpdateArgs) -> anyhow::Result<()> {
-    let mut algo = AlgoSettings::new(&args.algo)?;
-    let lifting = [
-        args.lifting_weight.map(|v| format!("lifting_weight={v:?}")),
-        args.lifting_samples.map(|v| format!("lifting_samples={v}")),
-    ];
-    for assignment in lifting
-        .into_iter()
-        .flatten()
-        .chain(args.set.iter().cloned())
-    {
-        algo.set(&assignment)?;
+    let mut values = toml::Table::new();
+    if let Some(weight) = args.lifting_weight {
+        values.insert("lifting_weight".into(), toml::Value::Float(weight));
     }
+    if let Some(samples) = args.lifting_samples {
+        values.insert(
+            "lifting_samples".into(),
+            toml::Value::Integer(samples as i64),
+        );
+    }
+    for assignment in &args.set {
+        let (field, value) = parse_assignment(assignment)?;
+        values.insert(field, value);
+    }
+    let algo = AlgoSettings::with_fields(&args.algo, &values)?;
     let report = bench_update(
         &algo,
         args.task,

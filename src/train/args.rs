@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::{ConfigError, Start, TrainConfig, TrainError};
-use crate::algos::{AlgoError, AlgoSettings, names};
+use crate::algos::{AlgoError, AlgoSettings, names, parse_assignment};
 use crate::delay::{DelayArgs, DelayDevice};
 use crate::learn::LearnDevice;
 use crate::tasks::TaskName;
@@ -100,22 +100,33 @@ pub struct TrainPlan {
 }
 
 impl TrainArgs {
-    /// The algorithm configuration the flags ask for, over `base` (the config file's).
+    /// The algorithm configuration the flags ask for, over `base` (the config file's): the
+    /// flags' typed values and `--set`'s, read together once.
     fn algo(&self, base: AlgoSettings) -> Result<AlgoSettings, AlgoError> {
-        let mut algo = match &self.algo {
-            Some(name) if name != base.name() => base.switch_to(name)?,
-            _ => base,
-        };
+        use toml::Value;
+        let mut values = toml::Table::new();
         let flags = [
-            self.alpha.map(|v| format!("initial_alpha={v:?}")),
-            self.fixed_alpha.then(|| "autotune_alpha=false".to_string()),
-            self.lifting_weight.map(|v| format!("lifting_weight={v:?}")),
-            self.lifting_samples.map(|v| format!("lifting_samples={v}")),
+            ("initial_alpha", self.alpha.map(Value::Float)),
+            (
+                "autotune_alpha",
+                self.fixed_alpha.then_some(Value::Boolean(false)),
+            ),
+            ("lifting_weight", self.lifting_weight.map(Value::Float)),
+            (
+                "lifting_samples",
+                self.lifting_samples.map(|k| Value::Integer(k as i64)),
+            ),
         ];
-        for assignment in flags.into_iter().flatten().chain(self.set.iter().cloned()) {
-            algo.set(&assignment)?;
+        for (field, value) in flags {
+            if let Some(value) = value {
+                values.insert(field.to_string(), value);
+            }
         }
-        Ok(algo)
+        for assignment in &self.set {
+            let (field, value) = parse_assignment(assignment)?;
+            values.insert(field, value);
+        }
+        base.with(self.algo.as_deref(), &values)
     }
 
     /// The configuration of a new run: defaults, then `--config`, then flags.

@@ -219,7 +219,7 @@ impl Trainer {
         let layout = batch.layout();
         let replay = ReplayStore::new(layout, config.replay_capacity)?;
         let devices = Devices::new(config.device)?;
-        let agent = config.algo.build(&spec, &devices, config.seed)?;
+        let agent = config.algo.build(&spec, &devices, config.seed);
         let stat_names = agent.stat_names();
         let learner_pool = learner_pool(config.algo.info().learner_threads)?;
         let state = LoopState {
@@ -562,7 +562,7 @@ pub fn evaluate_saved(
         .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
     let devices = Devices::new(config.device)?;
     let spec = AgentSpec::for_task(config.task, trained_delay)?;
-    let mut agent = config.algo.build(&spec, &devices, config.seed)?;
+    let mut agent = config.algo.build(&spec, &devices, config.seed);
     agent.load(&dir.join("agent"))?;
     let policy = if delay_free_policy {
         EvalPolicy::DelayFree

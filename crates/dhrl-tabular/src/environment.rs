@@ -6,8 +6,8 @@ use std::collections::VecDeque;
 
 use rand::Rng;
 
-use super::augmented::AugmentedMdp;
-use super::model::TabularModel;
+use crate::augmented::AugmentedMdp;
+use crate::model::TabularModel;
 
 /// An episodic simulator with finitely many observations and actions.
 pub trait Environment {

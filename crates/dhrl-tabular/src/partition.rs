@@ -13,10 +13,10 @@
 
 use std::collections::HashMap;
 
-use super::augmented::AugmentedMdp;
-use super::error::TabularError;
-use super::model::TabularModel;
-use super::sparse::{SparseDistribution, merge_union};
+use crate::augmented::AugmentedMdp;
+use crate::error::TabularError;
+use crate::model::TabularModel;
+use crate::sparse::{SparseDistribution, merge_union};
 
 /// `2^40`: beliefs are rounded to multiples of `1 / BELIEF_SCALE` before comparison.
 const BELIEF_SCALE: f64 = 1_099_511_627_776.0;

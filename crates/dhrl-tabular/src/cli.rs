@@ -4,13 +4,13 @@ use std::path::PathBuf;
 
 use anyhow::{Context, anyhow};
 
-use super::analysis::{AnalysisOptions, analyze};
-use super::augmented::{DEFAULT_MAX_AUGMENTED_STATES, SizeLimits, check_augmented_size};
-use super::bench::{BenchConfig, run_bench};
-use super::generate::{RandomMdpSpec, random_mdp};
-use super::mdp::FiniteMdp;
-use super::plot::write_bench_plot;
-use super::qlearning::QLearningConfig;
+use crate::analysis::{AnalysisOptions, analyze};
+use crate::augmented::{DEFAULT_MAX_AUGMENTED_STATES, SizeLimits, check_augmented_size};
+use crate::bench::{BenchConfig, run_bench};
+use crate::generate::{RandomMdpSpec, random_mdp};
+use crate::mdp::FiniteMdp;
+use crate::plot::write_bench_plot;
+use crate::qlearning::QLearningConfig;
 
 /// Check the paper's finite-domain guarantees (Prop. 3.3, 3.5, Cor. 3.4, Lemma 3.7) on a delayed
 /// MDP read from JSON or generated at random.

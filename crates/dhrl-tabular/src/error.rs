@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-/// Everything that can go wrong in [`crate::tabular`]. Every message says what was wrong and what
+/// Everything that can go wrong in this crate. Every message says what was wrong and what
 /// is accepted instead.
 #[derive(Debug, thiserror::Error)]
 pub enum TabularError {
@@ -167,7 +167,7 @@ pub enum TabularError {
         what: &'static str,
         /// Sweeps performed.
         iterations: usize,
-        /// The sweep limit in force (see [`crate::tabular::SolveOptions`]).
+        /// The sweep limit in force (see [`crate::SolveOptions`]).
         limit: usize,
         /// Sweeps the `γ`-contraction bound needs from the first sweep's change to the tolerance.
         needed: usize,

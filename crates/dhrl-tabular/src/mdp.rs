@@ -5,8 +5,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::error::TabularError;
-use super::model::TabularModel;
+use crate::error::TabularError;
+use crate::model::TabularModel;
 
 /// How far a transition row may sum away from one.
 pub const ROW_SUM_TOLERANCE: f64 = 1e-9;

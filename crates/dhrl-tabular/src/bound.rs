@@ -9,11 +9,11 @@
 
 use serde::Serialize;
 
-use super::error::TabularError;
-use super::model::TabularModel;
-use super::partition::check_partition_size;
-use super::quotient::{QuotientMdp, block_distribution};
-use super::sparse::{SparseAccumulator, l1_distance};
+use crate::error::TabularError;
+use crate::model::TabularModel;
+use crate::partition::check_partition_size;
+use crate::quotient::{QuotientMdp, block_distribution};
+use crate::sparse::{SparseAccumulator, l1_distance};
 
 /// The terms and the value of the Lemma 3.7 bound.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]

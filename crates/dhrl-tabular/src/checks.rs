@@ -8,11 +8,11 @@
 
 use serde::Serialize;
 
-use super::error::TabularError;
-use super::model::TabularModel;
-use super::partition::{Partition, check_partition_size};
-use super::quotient::block_distribution;
-use super::sparse::{SparseAccumulator, max_abs_difference};
+use crate::error::TabularError;
+use crate::model::TabularModel;
+use crate::partition::{Partition, check_partition_size};
+use crate::quotient::block_distribution;
+use crate::sparse::{SparseAccumulator, max_abs_difference};
 
 /// Default tolerance of the checks. Reward differences up to `tolerance·max(1, max |R|)` count as
 /// equal (relative to the reward scale); block-transition probabilities, which lie in `[0, 1]`,

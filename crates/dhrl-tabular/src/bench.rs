@@ -15,14 +15,14 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::augmented::{AugmentedMdp, SizeLimits, check_augmented_size};
-use super::environment::DelayedEnv;
-use super::error::TabularError;
-use super::generate::{RandomMdpSpec, random_mdp};
-use super::model::TabularModel;
-use super::partition::{Partition, belief_partition};
-use super::qlearning::{QLearningConfig, QTable, q_learning};
-use super::solve::{SolveOptions, evaluate_policy, value_iteration};
+use crate::augmented::{AugmentedMdp, SizeLimits, check_augmented_size};
+use crate::environment::DelayedEnv;
+use crate::error::TabularError;
+use crate::generate::{RandomMdpSpec, random_mdp};
+use crate::model::TabularModel;
+use crate::partition::{Partition, belief_partition};
+use crate::qlearning::{QLearningConfig, QTable, q_learning};
+use crate::solve::{SolveOptions, evaluate_policy, value_iteration};
 
 /// Settings of [`run_bench`].
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -4,15 +4,15 @@
 
 use serde::Serialize;
 
-use super::augmented::{AugmentedMdp, SizeLimits};
-use super::bound::value_loss_bound;
-use super::checks::{CHECK_TOLERANCE, check_homomorphism};
-use super::error::TabularError;
-use super::mdp::FiniteMdp;
-use super::model::TabularModel;
-use super::partition::{approximate_belief_partition, belief_partition, validate_epsilon};
-use super::quotient::QuotientMdp;
-use super::solve::{SolveOptions, evaluate_policy, value_iteration};
+use crate::augmented::{AugmentedMdp, SizeLimits};
+use crate::bound::value_loss_bound;
+use crate::checks::{CHECK_TOLERANCE, check_homomorphism};
+use crate::error::TabularError;
+use crate::mdp::FiniteMdp;
+use crate::model::TabularModel;
+use crate::partition::{approximate_belief_partition, belief_partition, validate_epsilon};
+use crate::quotient::QuotientMdp;
+use crate::solve::{SolveOptions, evaluate_policy, value_iteration};
 
 /// How well an abstract MDP stands in for the model it was built from.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]

@@ -5,9 +5,9 @@ use std::collections::TryReserveError;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::augmented::table_entries;
-use super::error::TabularError;
-use super::mdp::FiniteMdp;
+use crate::augmented::table_entries;
+use crate::error::TabularError;
+use crate::mdp::FiniteMdp;
 
 /// The table that [`random_mdp`] allocates, as named in its errors.
 const TABLE: &str = "transition rows |S|*|A|";

@@ -11,9 +11,9 @@
 
 use rand::Rng;
 
-use super::environment::Environment;
-use super::error::TabularError;
-use super::partition::Partition;
+use crate::environment::Environment;
+use crate::error::TabularError;
+use crate::partition::Partition;
 
 /// Settings of [`q_learning`].
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::Path;
 
 use clap::Parser;
-use dhrl::tabular::{
+use dhrl_tabular::{
     AnalysisOptions, AugmentedMdp, BenchConfig, CHECK_TOLERANCE, DEFAULT_MAX_AUGMENTED_STATES,
     DelayedEnv, Environment, FiniteMdp, ModelEnv, Partition, QLearningConfig, QuotientMdp,
     RandomMdpSpec, SizeLimits, SolveOptions, TabularArgs, TabularBenchArgs, TabularError,

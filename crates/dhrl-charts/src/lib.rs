@@ -1,11 +1,14 @@
-//! The two charts dhrl draws, as SVG with plotters (PNG copies rendered with resvg): lines
-//! over a numeric axis with a shaded ± band, and points with ± bars over named categories.
+//! The charts dhrl draws, as SVG with plotters (PNG copies rendered with resvg): lines over a
+//! numeric axis with a shaded ± band, the same on a logarithmic axis with ± bars and a reference
+//! level, and points with ± bars over named categories. `dhrl plot`, `dhrl report` and
+//! `dhrl tabular-bench` all draw through here.
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
 use plotters::prelude::*;
 
-type ChartResult = Result<(), Box<dyn std::error::Error>>;
+/// What every chart returns: `Ok`, or why the file could not be drawn.
+pub type ChartResult = Result<(), Box<dyn std::error::Error>>;
 
 /// One line: its label and `(x, mean, spread)` points.
 pub struct Line {
@@ -87,6 +90,89 @@ pub fn line_chart(lines: &[Line], labels: &Labels, out: &Path) -> ChartResult {
                 .into_iter()
                 .map(|p| Circle::new(p, 3, color.filled())),
         )?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// Lines with `mean ± spread` bars and a dot at each point on a logarithmic y axis, and, when
+/// given, a grey horizontal `reference` level with its label (e.g. a sample budget); legend top
+/// left. Bars are cut at the axis' lower end.
+pub fn log_line_chart(
+    lines: &[Line],
+    reference: Option<(&str, f64)>,
+    labels: &Labels,
+    out: &Path,
+) -> ChartResult {
+    let points = || lines.iter().flat_map(|l| l.points.iter());
+    let (x_min, x_max) = points().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+        (lo.min(p.0), hi.max(p.0))
+    });
+    let (x_min, x_max) = if x_min.is_finite() {
+        (x_min - 1.0, x_max + 1.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let (mut low, mut high) = reference.map_or((f64::INFINITY, 0.0), |(_, y)| (y, y));
+    for &(_, mean, spread) in points() {
+        low = low.min((mean - spread).max(mean * 0.5));
+        high = high.max(mean + spread);
+    }
+    if !low.is_finite() || low <= 0.0 {
+        low = 1.0;
+    }
+    let (low, high) = (
+        (low * 0.5).max(f64::MIN_POSITIVE),
+        (high * 2.0).max(low * 2.0),
+    );
+    let root = SVGBackend::new(out, (900, 560)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(labels.title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x_min..x_max, (low..high).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc(labels.x)
+        .y_desc(labels.y)
+        .x_labels(((x_max - x_min) as usize + 1).clamp(2, 30))
+        .draw()?;
+    if let Some((label, y)) = reference {
+        let grey = BLACK.mix(0.35);
+        chart
+            .draw_series(LineSeries::new(
+                [(x_min, y), (x_max, y)],
+                grey.stroke_width(1),
+            ))?
+            .label(label)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1))
+            });
+    }
+    for (i, line) in lines.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let means: Vec<(f64, f64)> = line.points.iter().map(|&(x, m, _)| (x, m)).collect();
+        chart
+            .draw_series(LineSeries::new(means.clone(), color.stroke_width(2)))?
+            .label(line.label.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        chart.draw_series(means.into_iter().map(|p| Circle::new(p, 4, color.filled())))?;
+        chart.draw_series(line.points.iter().map(|&(x, m, s)| {
+            PathElement::new(
+                vec![(x, (m - s).max(low)), (x, m + s)],
+                color.stroke_width(1),
+            )
+        }))?;
     }
     chart
         .configure_series_labels()

@@ -4,7 +4,7 @@
 //! how fast.)
 use clap::Parser;
 use criterion::{Criterion, criterion_group, criterion_main};
-use dhrl::tabular::{BenchConfig, TabularArgs, run_bench, run_tabular};
+use dhrl_tabular::{BenchConfig, TabularArgs, run_bench, run_tabular};
 
 #[derive(Parser)]
 struct TabularCli {

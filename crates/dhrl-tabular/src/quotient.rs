@@ -8,11 +8,11 @@
 //! block has the same reward and block-transition probabilities, so any weights give the exact
 //! homomorphic image of Definition 3.1.
 
-use super::error::TabularError;
-use super::mdp::{FiniteMdp, TransitionRows};
-use super::model::TabularModel;
-use super::partition::{Partition, check_partition_size};
-use super::sparse::{SparseAccumulator, SparseDistribution};
+use crate::error::TabularError;
+use crate::mdp::{FiniteMdp, TransitionRows};
+use crate::model::TabularModel;
+use crate::partition::{Partition, check_partition_size};
+use crate::sparse::{SparseAccumulator, SparseDistribution};
 
 /// `P(G|x, a) = Σ_{y ∈ G} P(y|x, a)` for every block `G` reached from `(x, a)`, sorted by block.
 pub(crate) fn block_distribution<M: TabularModel>(

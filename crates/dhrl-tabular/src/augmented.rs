@@ -8,10 +8,10 @@
 //! (`x' = (s', a_{t−Δ+1}, …, a_{t−1}, a)` with probability `P(s'|s_{t−Δ}, a_{t−Δ})`), so the
 //! memory cost is the belief-expected reward table, `|X|·|A|` numbers.
 
-use super::error::TabularError;
-use super::mdp::FiniteMdp;
-use super::model::TabularModel;
-use super::sparse::{SparseAccumulator, SparseDistribution};
+use crate::error::TabularError;
+use crate::mdp::FiniteMdp;
+use crate::model::TabularModel;
+use crate::sparse::{SparseAccumulator, SparseDistribution};
 
 /// The default upper bound on `|X| = |S|·|A|^Δ`.
 pub const DEFAULT_MAX_AUGMENTED_STATES: usize = 2_000_000;

@@ -13,8 +13,8 @@
 //! [`TabularError::NotConverged`] (naming `γ` and `n`) instead of spending the whole limit, and
 //! otherwise they allow `min(max_iterations, 2n + 16)` sweeps, the slack covering rounding noise.
 
-use super::error::TabularError;
-use super::model::TabularModel;
+use crate::error::TabularError;
+use crate::model::TabularModel;
 
 /// Stopping rule of the iterative solvers.
 #[derive(Clone, Copy, Debug, PartialEq)]
