@@ -1,5 +1,9 @@
-//! Bakes the folder of the libmujoco.so that `scripts/setup.sh` exposed into the extension's
-//! rpath, as the dhrl crate's own build script does for its binaries.
+//! The extension's run path is `$ORIGIN/../mujoco`: installed from a wheel, `dhrl/` and the
+//! `mujoco` package sit side by side in site-packages, so `libmujoco.so.3.17.0` is found in the
+//! mujoco wheel wherever the environment lives (and `dhrl/_installed.py` loads that same file
+//! before the extension, with a clear error when it is missing or of another version). Nothing
+//! of the checkout that built it is baked in. Linking needs the library once, from the folder
+//! `scripts/setup.sh` exposes (mujoco-rs finds it through `pkgconfig/mujoco.pc`).
 use std::path::PathBuf;
 
 fn main() {
@@ -14,8 +18,5 @@ fn main() {
             lib_dir.display()
         );
     }
-    let lib_dir = lib_dir
-        .canonicalize()
-        .expect("the set-up's library folder exists");
-    println!("cargo::rustc-link-arg=-Wl,-rpath,{}", lib_dir.display());
+    println!("cargo::rustc-link-arg=-Wl,-rpath,$ORIGIN/../mujoco");
 }

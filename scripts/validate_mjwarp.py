@@ -9,12 +9,12 @@ Usage (from the repository root):
         [--heavy-rollout-steps T'] [--no-cone-check] [--skip-rollout] [--kernel-cache-dir DIR]
         [--nconmax N] [--njmax N]
 
-dhrl steps the Gymnasium v4 tasks (SPEC.md §2) with libmujoco 3.17.0 in float64; MJWarp
+dhrl steps the Gymnasium v4 tasks (docs/DESIGN.md §2) with libmujoco 3.17.0 in float64; MJWarp
 re-implements MuJoCo's pipeline as Warp kernels in float32, here on Warp's CPU device (or a
 CUDA device). Two checks per task:
 
 1. **One step from the same states and controls.** K states per task are drawn from the task's
-   reset distribution (qpos0 + noise, qvel noise as in SPEC §2), each advanced a random 0..50
+   reset distribution (qpos0 + noise, qvel noise as in docs/DESIGN.md §2), each advanced a random 0..50
    steps with host ``mujoco.mj_step`` under uniform random controls (stopping before a
    terminating step; the first max(1, K//8) states are left fresh resets), so some are fresh
    resets and some are mid-episode with contacts. From each state one step with a
@@ -44,7 +44,7 @@ CUDA device). Two checks per task:
 2. **Rollout statistics.** W copies × T steps of uniform random actions, resetting on
    termination and at 1000 steps: dhrl through ``dhrl.make_vec(task, W, delay=0, seed=…)``;
    MJWarp with W worlds stepped together, rewards and terminations computed in numpy from its
-   qpos/qvel/xpos/xipos with the v4 formulas of SPEC §2 (velocities from positions before and
+   qpos/qvel/xpos/xipos with the v4 formulas of docs/DESIGN.md §2 (velocities from positions before and
    after the frame-skip loop over dt = timestep·frame_skip), terminated worlds re-drawn from the
    task's reset noise and written back. The trajectories are chaotic (a difference of one float32
    rounding grows to O(1) within tens to hundreds of steps), so only the *distributions* can
@@ -93,7 +93,7 @@ MAX_ADVANCE = 50  # a sampled state is 0..MAX_ADVANCE steps past its reset
 
 @dataclasses.dataclass(frozen=True)
 class TaskSpec:
-    """One Gymnasium v4 task as SPEC.md §2 defines it."""
+    """One Gymnasium v4 task as docs/DESIGN.md §2 defines it."""
 
     name: str
     xml: str

@@ -4,6 +4,8 @@ pub mod bench;
 pub mod delay;
 pub mod float_mode;
 pub mod learn;
+pub mod progress;
+#[cfg(feature = "cli")]
 pub mod report;
 pub mod rollout;
 pub mod seeds;
@@ -14,6 +16,8 @@ pub mod tasks;
 pub mod train;
 
 /// The charts, from the workspace crate `dhrl-charts`.
+#[cfg(feature = "cli")]
 pub use dhrl_charts as charts;
 /// Finite-domain DHRL (`dhrl tabular`), from the workspace crate `dhrl-tabular`.
+#[cfg(feature = "cli")]
 pub use dhrl_tabular as tabular;

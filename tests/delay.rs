@@ -1,4 +1,4 @@
-//! The delay layer against its contract (SPEC §1), on the CPU reference and on the GPU.
+//! The delay layer against its contract (docs/DESIGN.md §1), on the CPU reference and on the GPU.
 use std::collections::BTreeMap;
 
 use dhrl::delay::{

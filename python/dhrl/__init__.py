@@ -7,9 +7,15 @@ Importing dhrl registers its tasks with Gymnasium (``dhrl.registration``):
 ``gymnasium.make_vec("dhrl/HalfCheetah-delayed-v0", num_envs=16, delay=5)`` builds the same env.
 """
 
-from ._dhrl import MAX_DELAY
-from .registration import GYMNASIUM_IDS, register_envs
-from .vector import TASKS, DelayedVectorEnv, make_vec, task_name
+from ._installed import load_libmujoco, task_assets
+
+load_libmujoco()
+
+from ._dhrl import MAX_DELAY, set_assets_dir  # noqa: E402 (after libmujoco is loaded)
+from .registration import GYMNASIUM_IDS, register_envs  # noqa: E402
+from .vector import TASKS, DelayedVectorEnv, make_vec, task_name  # noqa: E402
+
+set_assets_dir(str(task_assets()))
 
 register_envs()
 

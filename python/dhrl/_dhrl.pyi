@@ -13,7 +13,7 @@ from typing import Final, TypedDict, final
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Batch", "raw_mj_step_rate", "TASKS", "MAX_DELAY"]
+__all__ = ["Batch", "raw_mj_step_rate", "set_assets_dir", "assets_dir", "TASKS", "MAX_DELAY"]
 
 TASKS: Final[list[tuple[str, str]]]
 """``(dhrl name, Gymnasium id)`` of every task, e.g. ``("half-cheetah", "HalfCheetah-v4")``."""
@@ -132,3 +132,10 @@ class Batch:
 def raw_mj_step_rate(task: str, copies: int, env_steps: int) -> float:
     """Environment steps per second of ``copies`` copies of ``task`` stepped in turn by bare
     ``mj_step`` calls on this thread."""
+
+def set_assets_dir(path: str) -> None:
+    """Reads the task XMLs from ``path`` from now on (``import dhrl`` points it at the installed
+    Gymnasium's ``envs/mujoco/assets``); the environment variable ``DHRL_ASSETS_DIR`` still wins."""
+
+def assets_dir() -> str:
+    """The folder the task XMLs are read from."""

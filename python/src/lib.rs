@@ -416,10 +416,25 @@ fn raw_mj_step_rate(py: Python<'_>, task: &str, copies: usize, env_steps: usize)
     })
 }
 
+/// Reads the task XMLs from `path` from now on (`dhrl/__init__.py` points it at the installed
+/// Gymnasium's `envs/mujoco/assets`); `$DHRL_ASSETS_DIR` still wins.
+#[pyfunction]
+fn set_assets_dir(path: std::path::PathBuf) {
+    dhrl::sim::set_assets_dir(path);
+}
+
+/// The folder the task XMLs are read from.
+#[pyfunction]
+fn assets_dir() -> String {
+    dhrl::sim::assets_dir().display().to_string()
+}
+
 #[pymodule]
 fn _dhrl(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Batch>()?;
     m.add_function(wrap_pyfunction!(raw_mj_step_rate, m)?)?;
+    m.add_function(wrap_pyfunction!(set_assets_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(assets_dir, m)?)?;
     m.add(
         "TASKS",
         TaskName::ALL

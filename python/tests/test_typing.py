@@ -79,7 +79,7 @@ def check_arrays(fields: dict[str, ast.expr], names: dict[str, ast.AST], value: 
 def test_module_names_match(stub):
     names = top_level(stub)
     public = {n for n in dir(_dhrl) if not n.startswith("_")}
-    assert public == {"Batch", "raw_mj_step_rate", "TASKS", "MAX_DELAY"}
+    assert public == {"Batch", "raw_mj_step_rate", "TASKS", "MAX_DELAY", "set_assets_dir", "assets_dir"}
     assert public <= set(names), f"missing from the stub: {sorted(public - set(names))}"
     stub_public = {n for n in names if not n.startswith("_")}
     assert stub_public == public, f"in the stub only: {sorted(stub_public - public)}"

@@ -23,7 +23,7 @@ use crate::learn::{
 };
 
 crate::algo_config! {
-    /// SAC's hyperparameters (SPEC §3): the configuration of `sac`, and the shared part of
+    /// SAC's hyperparameters (docs/DESIGN.md §3.3): the configuration of `sac`, and the shared part of
     /// every algorithm built on [`SacLearner`].
     pub struct Config {
         /// Discount factor γ.

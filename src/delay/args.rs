@@ -2,28 +2,41 @@
 use super::{DelayConfig, WarmupActions};
 
 /// `--delay`, `--action-delay`, `--random-delay --max-delay`, `--actuator-noise`, `--warmup`.
-#[derive(clap::Args, Debug, Clone, Default)]
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct DelayArgs {
     /// Observation delay Δ_o in steps (reward and done flags travel with the observation).
-    #[arg(long, value_name = "STEPS", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "STEPS", allow_negative_numbers = true)
+    )]
     pub delay: Option<i64>,
     /// Action delay Δ_a in steps; the agent sees the total Δ = Δ_o + Δ_a.
-    #[arg(long, value_name = "STEPS", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "STEPS", allow_negative_numbers = true)
+    )]
     pub action_delay: Option<i64>,
     /// Random observation delays in 1..=--max-delay, out of order; the conservative agent
     /// acts on observations exactly --max-delay old.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub random_delay: bool,
     /// The bound Δ_max of --random-delay.
-    #[arg(long, value_name = "STEPS", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "STEPS", allow_negative_numbers = true)
+    )]
     pub max_delay: Option<i64>,
     /// σ of Gaussian actuator noise: the executed action is clip(a + N(0, σ²)).
-    #[arg(long, value_name = "SIGMA", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "SIGMA", allow_negative_numbers = true)
+    )]
     pub actuator_noise: Option<f64>,
     /// Actions executed before the first observation arrives: zeros (a new run's default) or
     /// random (the paper's Algorithm 1 as written, which caps InvertedPendulum far below its
     /// published returns).
-    #[arg(long, value_enum)]
+    #[cfg_attr(feature = "cli", arg(long, value_enum))]
     pub warmup: Option<WarmupActions>,
 }
 

@@ -1,16 +1,17 @@
 //! What the agent's delay is, checked once.
 use serde::{Deserialize, Serialize};
 
-/// The largest total delay the layer supports (ring buffers hold 2Δ + 2 steps per copy).
+/// The largest total delay the layer supports (ring buffers hold 2Δ + 3 slots per copy).
 pub const MAX_DELAY: usize = 64;
 
-/// What is executed for `t < Δ`, before any observation has arrived (SPEC §1).
+/// What is executed for `t < Δ`, before any observation has arrived (docs/DESIGN.md §1.3).
 ///
 /// Zeros by default: on InvertedPendulum a random warm-up ends 56% of the episodes at Δ = 5
 /// (88% at Δ = 10) before any policy acts, which caps every policy's mean return far below the
 /// paper's published ones; the paper group's BPQL code executes zeros
 /// (docs/results/warmup-evidence.md, `scripts/warmup_evidence.py`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum WarmupActions {
     /// Uniform random in the action bounds (the paper's Algorithm 1 as written).

@@ -7,7 +7,8 @@ use super::layer::DelayLayer;
 use super::{DelayConfig, DelayError};
 
 /// Where the delay layer's ring buffers live.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum DelayDevice {
     /// Host memory, updated by the CPU reference.

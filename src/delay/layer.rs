@@ -11,7 +11,7 @@ use super::records::{RecordBatch, StepInput};
 use super::transitions::Transitions;
 use crate::snapshot::{SnapshotError, read_section, write_section};
 
-/// What every implementation of the delay layer offers (SPEC §1).
+/// What every implementation of the delay layer offers (docs/DESIGN.md §1).
 pub trait DelayLayer: Send {
     fn layout(&self) -> DelayLayout;
     /// Starts every copy's first episode from `observations` (`[N, obs_dim]`, the `s_0`s).

@@ -1,4 +1,4 @@
-//! The delay layer (SPEC §1): turns a batch of undelayed simulations into what a delayed agent
+//! The delay layer (docs/DESIGN.md §1): turns a batch of undelayed simulations into what a delayed agent
 //! sees — augmented states `x_t = (s_{t-Δ}, a_{t-Δ}, …, a_{t-1})` — and what the learners train
 //! on — time-aligned step records, from which every transition
 //! `(x_τ, s_τ, a_τ, r_τ, x_{τ+1}, s_{τ+1}, terminated_{τ+1})` is rebuilt.

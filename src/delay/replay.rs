@@ -10,7 +10,7 @@ use super::records::RecordBatch;
 use super::transitions::{BatchExtras, Transitions};
 use crate::snapshot::{SnapshotError, read_section, write_section};
 
-/// The default capacity, in steps (SPEC §3).
+/// The default capacity, in steps (docs/DESIGN.md §3.3).
 pub const DEFAULT_CAPACITY: usize = 1_000_000;
 
 #[derive(Debug, thiserror::Error, PartialEq)]

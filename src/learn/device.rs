@@ -6,7 +6,8 @@ use super::LearnError;
 
 /// `cpu`: burn's pure-Rust Flex backend; `wgpu`: burn's wgpu backend (cargo feature
 /// `wgpu-learner`, for a real GPU).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum LearnDevice {
     #[default]

@@ -9,7 +9,7 @@ use burn::tensor::activation::{relu, sigmoid};
 use super::losses::squashed_gaussian_log_prob;
 use super::tensors::matrix;
 
-/// Hidden width of every network (SPEC §3).
+/// Hidden width of every network (docs/DESIGN.md §3.3).
 pub const HIDDEN: usize = 256;
 /// Bounds of the policy's log standard deviation.
 pub const LOG_STD_MIN: f64 = -20.0;

@@ -8,7 +8,7 @@ use super::stats::mean_std;
 use crate::algos::{names, paper_name};
 use crate::tasks::TaskName;
 
-/// The paper's Table 1 (arXiv source `delayed-homomorphic-rl.tex`, table `result-table`:
+/// The paper's Table 1 (its arXiv LaTeX source, table `result-table`:
 /// MuJoCo v3 tasks and InvertedPendulum-v2, 1M steps, 5 seeds), transcribed as
 /// `delay,algorithm,task,mean,std,marked_best` with Δ = 0 for delay-free SAC.
 const PAPER_TABLE1: &str = include_str!("paper_table1.csv");

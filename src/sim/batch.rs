@@ -19,7 +19,7 @@ pub struct BatchConfig {
     pub threads: usize,
     /// Copy `i` draws from ChaCha8 stream `i` of this seed, whatever the thread count.
     pub seed: u64,
-    /// σ of the Gaussian actuator noise: the executed action is `clip(a + N(0, σ²))` (SPEC §1).
+    /// σ of the Gaussian actuator noise: the executed action is `clip(a + N(0, σ²))` (docs/DESIGN.md §1.8).
     pub actuator_noise: f64,
 }
 
@@ -518,7 +518,7 @@ impl EnvCopy {
 }
 
 /// The action the actuators receive: the chosen one, or `clip(a + N(0, σ²))` under actuator
-/// noise (SPEC §1). Without noise it is passed on unclipped, as Gymnasium does.
+/// noise (docs/DESIGN.md §1.8). Without noise it is passed on unclipped, as Gymnasium does.
 fn executed_action(
     action: &[impl Copy + Into<f64>],
     noise: Option<Normal<f64>>,

@@ -7,7 +7,7 @@ mod model;
 
 pub use batch::{BatchConfig, BatchSnapshot, BatchedEnv, CopyStep};
 pub use env::{Env, EnvSnapshot, StepOutcome};
-pub use model::{TaskModel, assets_dir};
+pub use model::{TaskModel, assets_dir, set_assets_dir};
 
 /// Gymnasium's `TimeLimit` for every benchmark task.
 pub const MAX_EPISODE_STEPS: u32 = 1000;

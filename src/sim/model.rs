@@ -1,17 +1,28 @@
 //! Loading a task's MuJoCo model once, for every copy to share.
 use std::path::PathBuf;
-use std::sync::{Arc, Once};
+use std::sync::{Arc, Mutex, Once};
 
 use mujoco_rs::prelude::{MjData, MjModel, MjtObjBase};
 
 use super::SimError;
 use crate::tasks::{Progress, TaskDef, TaskName};
 
-/// Where the task XMLs are: `$DHRL_ASSETS_DIR` at run time, else the folder `scripts/setup.sh`
-/// made, baked in at build time by `.cargo/config.toml`.
+/// The folder [`set_assets_dir`] chose, if any.
+static ASSETS_DIR: Mutex<Option<PathBuf>> = Mutex::new(None);
+
+/// Makes `dir` the folder of the task XMLs for this process (the Python package points it at
+/// the installed Gymnasium's `envs/mujoco/assets`); `$DHRL_ASSETS_DIR` still wins.
+pub fn set_assets_dir(dir: PathBuf) {
+    *ASSETS_DIR.lock().unwrap_or_else(|e| e.into_inner()) = Some(dir);
+}
+
+/// Where the task XMLs are: `$DHRL_ASSETS_DIR` at run time, else the folder given to
+/// [`set_assets_dir`], else the folder `scripts/setup.sh` made, baked in at build time by
+/// `.cargo/config.toml`.
 pub fn assets_dir() -> PathBuf {
     std::env::var_os("DHRL_ASSETS_DIR")
         .map(PathBuf::from)
+        .or_else(|| ASSETS_DIR.lock().unwrap_or_else(|e| e.into_inner()).clone())
         .or_else(|| option_env!("DHRL_ASSETS_DIR").map(PathBuf::from))
         .unwrap_or_else(|| PathBuf::from(".deps/mujoco-assets"))
 }

@@ -7,10 +7,9 @@ use std::process::Child;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use indicatif::{ProgressBar, ProgressStyle};
-
 use super::SweepError;
 use super::manifest::{ManifestRun, RunOutcome, RunState, Sweep};
+use crate::progress::Progress;
 use crate::train::{Start, TrainError, has_checkpoint, train};
 
 /// The exit code of `dhrl sweep run-one` for a run stopped by a signal after a checkpoint
@@ -152,24 +151,14 @@ pub fn run_local(
         .collect();
     let total_steps: u64 = steps.iter().map(|(r, _)| r.config.steps).sum();
     let steps_before: u64 = steps.iter().map(|(_, s)| s).sum();
-    let bar = if progress {
-        ProgressBar::new(total_steps)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} steps  ETA {eta}  {msg}")
-            .expect("a valid template"),
+    let bar = Progress::new(
+        total_steps,
+        "{bar:30} {pos}/{len} steps  ETA {eta}  {msg}",
+        progress,
     );
     bar.set_position(steps_before);
     bar.reset_eta();
-    let say = |line: String| {
-        if progress {
-            bar.println(line);
-        } else {
-            eprintln!("{line}");
-        }
-    };
+    let say = |line: String| bar.println(line);
     let logs = sweep.dir.join("logs");
     std::fs::create_dir_all(&logs).map_err(|e| SweepError::Io {
         path: logs.display().to_string(),

@@ -1,4 +1,4 @@
-//! The six benchmark tasks of the paper, with Gymnasium MuJoCo v4 semantics (SPEC.md §2).
+//! The six benchmark tasks of the paper, with Gymnasium MuJoCo v4 semantics (docs/DESIGN.md §2).
 //!
 //! A task is a small, declarative definition over one simulation copy: its model file, frame
 //! skip, reset noise, observation, reward weights and termination. Stepping, batching, threading
@@ -71,21 +71,10 @@ impl fmt::Debug for TaskDef {
 }
 
 /// The task names accepted on the command line and in configs (kebab-case).
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    PartialOrd,
-    Ord,
-    Hash,
-    Serialize,
-    Deserialize,
-    clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
-#[value(rename_all = "kebab-case")]
+#[cfg_attr(feature = "cli", value(rename_all = "kebab-case"))]
 pub enum TaskName {
     Ant,
     HalfCheetah,

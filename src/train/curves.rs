@@ -7,7 +7,6 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use super::{TrainConfig, TrainError, io_error};
-use crate::charts::{Labels, Line, line_chart};
 
 /// One group of runs (the same task, algorithm, delay and lifting settings; several seeds).
 #[derive(Debug, Clone, Serialize)]
@@ -143,7 +142,9 @@ pub fn curve_summary(label: String, members: &[(u64, Vec<EvalRow>)]) -> CurveSum
 }
 
 /// Draws the curves (mean over seeds, with a shaded ± std band) to an SVG file.
+#[cfg(feature = "cli")]
 pub fn plot_curves(curves: &[CurveSummary], title: &str, out: &Path) -> Result<(), TrainError> {
+    use crate::charts::{Labels, Line, line_chart};
     let lines: Vec<Line> = curves
         .iter()
         .map(|curve| Line {

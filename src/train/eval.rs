@@ -1,4 +1,4 @@
-//! Evaluation on separate delayed copies with deterministic actions (SPEC §3): an episode's
+//! Evaluation on separate delayed copies with deterministic actions (docs/DESIGN.md §4.1): an episode's
 //! return is the sum of the true rewards of all its steps, the warm-up steps before the first
 //! observation arrives included, up to termination or the time limit.
 use crate::algos::{ActMode, Agent};

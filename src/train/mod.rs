@@ -2,6 +2,7 @@
 //! gradient update per environment step, periodic evaluation on separate delayed copies,
 //! CSV logs, and atomic checkpoints that a killed run resumes from.
 
+#[cfg(feature = "cli")]
 mod args;
 mod checkpoint;
 mod config;
@@ -10,12 +11,17 @@ mod eval;
 mod logs;
 mod run;
 
+#[cfg(feature = "cli")]
 pub use args::{TrainArgs, TrainPlan};
 pub use checkpoint::has_checkpoint;
 pub use config::{ConfigError, TrainConfig};
-pub use curves::{CurveSummary, EvalRow, curve_summary, plot_curves, read_evals, summarize_runs};
+#[cfg(feature = "cli")]
+pub use curves::plot_curves;
+pub use curves::{CurveSummary, EvalRow, curve_summary, read_evals, summarize_runs};
 pub use eval::{EvalResult, evaluate};
-pub use run::{Start, TrainSummary, evaluate_saved, learner_pool, stop_on_signals, train};
+#[cfg(feature = "cli")]
+pub use run::stop_on_signals;
+pub use run::{Start, TrainSummary, evaluate_saved, learner_pool, train};
 
 use crate::delay::{DelayError, ReplayError};
 use crate::learn::LearnError;

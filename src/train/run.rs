@@ -4,7 +4,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, LazyLock};
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -16,6 +15,7 @@ use super::{ConfigError, TrainConfig, TrainError, io_error};
 use crate::algos::{ActMode, Agent, AgentSpec, UpdateContext};
 use crate::delay::{DelayArgs, DelayConfig, DelayedBatch, ReplayError, ReplayStore};
 use crate::learn::Devices;
+use crate::progress::Progress;
 use crate::seeds;
 use crate::sim::{BatchConfig, BatchSnapshot};
 
@@ -125,6 +125,7 @@ fn stop_requested() -> bool {
 /// terminal) and SIGUSR1 (a cluster's warning before its time limit) stop training at the end
 /// of the current step with a checkpoint, so that `--resume` continues exactly. A second
 /// SIGTERM, SIGINT or SIGHUP (not one after SIGUSR1's warning) ends the process at once.
+#[cfg(feature = "cli")]
 pub fn stop_on_signals() -> Result<(), TrainError> {
     use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM, SIGUSR1};
     use signal_hook::flag::{register, register_conditional_shutdown};
@@ -448,14 +449,10 @@ impl Trainer {
 
     fn run(mut self, show_progress: bool) -> Result<TrainSummary, TrainError> {
         let c = self.config.clone();
-        let bar = if show_progress {
-            ProgressBar::new(c.steps)
-        } else {
-            ProgressBar::hidden()
-        };
-        bar.set_style(
-            ProgressStyle::with_template("{bar:30} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}")
-                .expect("a valid template"),
+        let bar = Progress::new(
+            c.steps,
+            "{bar:30} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}",
+            show_progress,
         );
         bar.set_position(self.state.env_steps);
         let session_start = Instant::now();

@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
 /// What every chart returns: `Ok`, or why the file could not be drawn.
@@ -37,6 +38,49 @@ fn y_range(values: impl Iterator<Item = (f64, f64)>) -> std::ops::Range<f64> {
     (low - margin)..(high + margin)
 }
 
+/// A blank 900×560 SVG canvas at `out`.
+fn canvas(out: &Path) -> Result<DrawingArea<SVGBackend<'_>, Shift>, Box<dyn std::error::Error>> {
+    let root = SVGBackend::new(out, (900, 560)).into_drawing_area();
+    root.fill(&WHITE)?;
+    Ok(root)
+}
+
+/// Every chart's frame: the title, margins and axis label areas (`y_label_area` wide).
+fn frame<'a, 'b>(
+    root: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    labels: &Labels,
+    y_label_area: u32,
+) -> ChartBuilder<'a, 'b, SVGBackend<'b>> {
+    let mut builder = ChartBuilder::on(root);
+    builder
+        .caption(labels.title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(y_label_area);
+    builder
+}
+
+/// A legend entry drawn as a short line in `color`.
+fn legend_line(color: RGBAColor, width: u32) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(width))
+}
+
+/// Draws the legend at `position` and writes the file.
+fn legend_and_save<'a, 'b: 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, SVGBackend<'b>, CT>,
+    root: &DrawingArea<SVGBackend<'b>, Shift>,
+    position: SeriesLabelPosition,
+) -> ChartResult {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
 /// Lines with a shaded `mean ± spread` band and a dot at each point, legend top left.
 pub fn line_chart(lines: &[Line], labels: &Labels, out: &Path) -> ChartResult {
     let x_max = lines
@@ -52,14 +96,9 @@ pub fn line_chart(lines: &[Line], labels: &Labels, out: &Path) -> ChartResult {
             .iter()
             .flat_map(|l| l.points.iter().map(|p| (p.1, p.2))),
     );
-    let root = SVGBackend::new(out, (900, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(labels.title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x_min..(x_max * 1.02).max(x_min + 1e-9), y)?;
+    let root = canvas(out)?;
+    let mut chart =
+        frame(&root, labels, 70).build_cartesian_2d(x_min..(x_max * 1.02).max(x_min + 1e-9), y)?;
     chart
         .configure_mesh()
         .x_desc(labels.x)
@@ -82,23 +121,14 @@ pub fn line_chart(lines: &[Line], labels: &Labels, out: &Path) -> ChartResult {
         chart
             .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))?
             .label(line.label.clone())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+            .legend(legend_line(color, 2));
         chart.draw_series(
             points
                 .into_iter()
                 .map(|p| Circle::new(p, 3, color.filled())),
         )?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
-    root.present()?;
-    Ok(())
+    legend_and_save(&mut chart, &root, SeriesLabelPosition::UpperLeft)
 }
 
 /// Lines with `mean ± spread` bars and a dot at each point on a logarithmic y axis, and, when
@@ -131,14 +161,9 @@ pub fn log_line_chart(
         (low * 0.5).max(f64::MIN_POSITIVE),
         (high * 2.0).max(low * 2.0),
     );
-    let root = SVGBackend::new(out, (900, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(labels.title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(80)
-        .build_cartesian_2d(x_min..x_max, (low..high).log_scale())?;
+    let root = canvas(out)?;
+    let mut chart =
+        frame(&root, labels, 80).build_cartesian_2d(x_min..x_max, (low..high).log_scale())?;
     chart
         .configure_mesh()
         .x_desc(labels.x)
@@ -153,9 +178,7 @@ pub fn log_line_chart(
                 grey.stroke_width(1),
             ))?
             .label(label)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1))
-            });
+            .legend(legend_line(grey, 1));
     }
     for (i, line) in lines.iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
@@ -163,9 +186,7 @@ pub fn log_line_chart(
         chart
             .draw_series(LineSeries::new(means.clone(), color.stroke_width(2)))?
             .label(line.label.clone())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+            .legend(legend_line(color, 2));
         chart.draw_series(means.into_iter().map(|p| Circle::new(p, 4, color.filled())))?;
         chart.draw_series(line.points.iter().map(|&(x, m, s)| {
             PathElement::new(
@@ -174,14 +195,7 @@ pub fn log_line_chart(
             )
         }))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
-    root.present()?;
-    Ok(())
+    legend_and_save(&mut chart, &root, SeriesLabelPosition::UpperLeft)
 }
 
 /// One series over the categories: its label and, per category, `(mean, spread)` if any.
@@ -202,15 +216,9 @@ pub fn category_chart(
             .iter()
             .flat_map(|s| s.values.iter().flatten().copied()),
     );
-    let root = SVGBackend::new(out, (900, 560)).into_drawing_area();
-    root.fill(&WHITE)?;
+    let root = canvas(out)?;
     let n = categories.len() as f64;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(labels.title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(-0.5..(n - 0.5), y)?;
+    let mut chart = frame(&root, labels, 70).build_cartesian_2d(-0.5..(n - 0.5), y)?;
     let names = categories.to_vec();
     chart
         .configure_mesh()
@@ -248,14 +256,7 @@ pub fn category_chart(
             PathElement::new(vec![(x, m - d), (x, m + d)], color.stroke_width(2))
         }))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
-    root.present()?;
-    Ok(())
+    legend_and_save(&mut chart, &root, SeriesLabelPosition::UpperRight)
 }
 
 /// The system's fonts, loaded once, with a sans-serif family that exists here (plotters

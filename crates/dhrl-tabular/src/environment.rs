@@ -1,6 +1,6 @@
 //! Sampling environments for Q-learning: any [`TabularModel`] as a generative simulator, and the
 //! delayed environment `M⁺ = (M, Δ)` that simulates the true process and shows the agent only the
-//! augmented state `x_t = (s_{t−Δ}, a_{t−Δ}, …, a_{t−1})` (paper section 2.1, SPEC §1).
+//! augmented state `x_t = (s_{t−Δ}, a_{t−Δ}, …, a_{t−1})` (paper section 2.1; docs/DESIGN.md §1.2).
 
 use std::collections::VecDeque;
 
