@@ -12,6 +12,9 @@ pub struct Progress {
     position: std::sync::atomic::AtomicU64,
     #[cfg(not(feature = "cli"))]
     len: u64,
+    /// The last message printed: a repeated one is not printed again.
+    #[cfg(not(feature = "cli"))]
+    message: std::sync::Mutex<String>,
 }
 
 impl Progress {
@@ -36,6 +39,7 @@ impl Progress {
                 visible,
                 position: std::sync::atomic::AtomicU64::new(0),
                 len,
+                message: std::sync::Mutex::new(String::new()),
             }
         }
     }
@@ -55,17 +59,22 @@ impl Progress {
         self.bar.reset_eta();
     }
 
-    /// The message beside the bar (or, without the `cli` feature, a line with the position).
+    /// The message beside the bar (or, without the `cli` feature, a line with the position when
+    /// the message is new).
     pub fn set_message(&self, message: String) {
         #[cfg(feature = "cli")]
         self.bar.set_message(message);
         #[cfg(not(feature = "cli"))]
-        if self.visible {
-            eprintln!(
-                "{}/{} steps  {message}",
-                self.position.load(std::sync::atomic::Ordering::Relaxed),
-                self.len
-            );
+        {
+            let mut last = self.message.lock().unwrap_or_else(|e| e.into_inner());
+            if self.visible && *last != message {
+                eprintln!(
+                    "{}/{} steps  {message}",
+                    self.position.load(std::sync::atomic::Ordering::Relaxed),
+                    self.len
+                );
+            }
+            *last = message;
         }
     }
 
