@@ -5,7 +5,8 @@ files, every source file under src/, every file the sources pull in at compile t
 (include_str!, include_bytes!, include_wgsl!), every declared bench, test and example, and
 nothing of the checkout's own state (.deps/, runs/, target/, docs/); and that the library
 without its default `cli` feature (what the Python extension and library users build) depends on
-none of the command line's crates. Exits 1 with one line per problem."""
+none of the command line's crates. Exits 1 with one line per problem. (The packaged tests that
+play Gymnasium through `scripts/` and the set-up's venv run only in the repository.)"""
 
 import pathlib
 import re
@@ -39,6 +40,11 @@ def problems(crate: pathlib.Path) -> list[str]:
     for key in ("description", "license", "readme", "keywords", "categories"):
         if key not in package:
             found.append(f"{name}: Cargo.toml sets no `{key}`")
+    # crates.io's rules: at most five keywords, each at most 20 ASCII characters.
+    keywords = package.get("keywords", [])
+    if len(keywords) > 5:
+        found.append(f"{name}: {len(keywords)} keywords; crates.io takes at most 5")
+    found += [f"{name}: keyword {k!r} is longer than crates.io's 20 characters" for k in keywords if len(k) > 20]
     needed = {"Cargo.toml", "LICENSE-MIT", "LICENSE-APACHE", package.get("readme", "README.md")}
     if (crate / "build.rs").is_file():
         needed.add("build.rs")

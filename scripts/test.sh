@@ -94,5 +94,5 @@ echo "test: wheel $(basename target/wheels/dhrl-*.whl)" >&2
 # What `cargo package` would publish of each crate: complete, licensed, nothing of the checkout.
 .deps/venv/bin/python scripts/check_package.py
 stage_done "wheel (maturin, auditwheel), cargo package"
-PYTHONPATH="$PWD/python" .deps/venv/bin/python -m pytest -q python/tests
+DHRL_REQUIRE_WHEEL=1 PYTHONPATH="$PWD/python" .deps/venv/bin/python -m pytest -q python/tests
 stage_done "Python tests (pytest)"

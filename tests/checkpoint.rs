@@ -3,6 +3,8 @@
 //! path, so both used to reach into the new files, or fail on the missing ones). The agent is
 //! saved after updates that moved every optimiser state, input statistic and schedule it has,
 //! so a load that skipped any of them would show in the updates after it.
+// Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
+#![cfg(feature = "cli")]
 mod common;
 
 use dhrl::algos::{

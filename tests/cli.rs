@@ -1,4 +1,6 @@
 //! The command line: bad input is a clear error (exit code 2 for usage, 1 otherwise), never a panic.
+// Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
+#![cfg(feature = "cli")]
 use std::path::Path;
 use std::process::{Command, Output};
 

@@ -2,6 +2,8 @@
 //! production update's lifting gradient reaching the regular policy only,
 //! D2HPG without lifting being exactly BPQL beside an independent delay-free SAC, and both
 //! learning a small delayed task.
+// Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
+#![cfg(feature = "cli")]
 mod common;
 
 use std::sync::Mutex;

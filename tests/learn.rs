@@ -1,4 +1,6 @@
 //! The SAC pieces against values computed by hand on tiny inputs.
+// Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
+#![cfg(feature = "cli")]
 mod common;
 
 use burn::module::{ModuleVisitor, Param};

@@ -1,6 +1,8 @@
 //! Parity with Gymnasium: for every task, `dhrl rollout` reproduces the observations, rewards
 //! and flags of `gymnasium.make("<Task>-v4")` step by step, from the same states and actions,
 //! as played by `scripts/gym_oracle.py` in the venv that `scripts/setup.sh` made.
+// Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
+#![cfg(feature = "cli")]
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

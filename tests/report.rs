@@ -1,6 +1,8 @@
 //! `dhrl report`: rliable's statistics against hand values, the shipped Table 1, and a report
 //! of run folders with known final returns (their configurations planned by a real
 //! experiment), checked cell by cell.
+// Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
+#![cfg(feature = "cli")]
 use std::path::Path;
 use std::process::Command;
 

@@ -1,6 +1,8 @@
 //! Sweeps: experiments expand into manifests with stable run ids, the local runner finishes
 //! every run and picks up where a killed sweep stopped, and a run stopped by a signal leaves
 //! a checkpoint that resumes to the uninterrupted result.
+// Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
+#![cfg(feature = "cli")]
 mod common;
 
 use std::path::{Path, PathBuf};

@@ -1,6 +1,8 @@
 //! `dhrl train` end to end: it learns, every delayed algorithm runs on every task and delay
 //! option, it refuses to overwrite, and a killed run resumes to exactly the run that was never
 //! interrupted.
+// Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
+#![cfg(feature = "cli")]
 mod common;
 
 use std::path::Path;

@@ -6,7 +6,7 @@
 //! `DHRL_WGPU_SOFTWARE=vulkan` (Mesa's lavapipe: what `scripts/test.sh`, and so CI, does);
 //! without either they return early and say so, and `DHRL_REQUIRE_WGPU_LEARNER=1` (set by
 //! `scripts/test.sh`) turns that into a failure so that nothing skips silently.
-#![cfg(feature = "wgpu-learner")]
+#![cfg(all(feature = "wgpu-learner", feature = "cli"))]
 
 mod common;
 

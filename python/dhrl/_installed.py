@@ -36,7 +36,10 @@ def load_libmujoco() -> pathlib.Path:
     library = folder / f"libmujoco.so.{MUJOCO_VERSION}" if folder else None
     if library is None or not library.is_file():
         raise ImportError(f"the installed mujoco {version} has no libmujoco.so.{MUJOCO_VERSION} (at {library}); {fix}")
-    ctypes.CDLL(str(library))
+    try:
+        ctypes.CDLL(str(library))
+    except OSError as e:
+        raise ImportError(f"dhrl could not load {library}: {e}; {fix}") from e
     return library
 
 

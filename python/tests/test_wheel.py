@@ -2,7 +2,9 @@
 ``target/wheels/``), installed with its dependencies into a fresh venv in a temporary folder,
 and run from there — ``make_vec`` and one step of every task — with nothing of the checkout on
 any path: its libmujoco must come from the venv's mujoco wheel, its task XMLs from the venv's
-Gymnasium, and the extension's run path must name no folder of the machine that built it."""
+Gymnasium, and the extension's run path must name no folder of the machine that built it.
+Needs PyPI (the venv installs the wheel's dependencies). Skipped without a built wheel, unless
+``DHRL_REQUIRE_WHEEL=1`` (``scripts/test.sh`` sets it)."""
 
 import json
 import os
@@ -36,7 +38,10 @@ print(json.dumps(out))
 def wheel() -> pathlib.Path:
     wheels = sorted((ROOT / "target" / "wheels").glob("dhrl-*.whl"), key=lambda p: p.stat().st_mtime)
     if not wheels:
-        pytest.fail("no wheel in target/wheels: build it with `maturin build --release -m python/Cargo.toml` (scripts/test.sh does)")
+        missing = "no wheel in target/wheels: build it with `maturin build --release -m python/Cargo.toml` (scripts/test.sh does)"
+        if os.environ.get("DHRL_REQUIRE_WHEEL") == "1":
+            pytest.fail(missing)
+        pytest.skip(missing)
     return wheels[-1]
 
 

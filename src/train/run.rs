@@ -113,7 +113,7 @@ pub fn learner_pool(threads: usize) -> Result<rayon::ThreadPool, TrainError> {
 }
 
 /// Set when the process is asked to stop (SIGTERM, SIGINT, SIGUSR1 once
-/// [`stop_on_signals`] is installed): the loop writes a checkpoint at the end of the current
+/// `stop_on_signals` is installed): the loop writes a checkpoint at the end of the current
 /// step and returns [`TrainError::Interrupted`].
 static STOP: LazyLock<Arc<AtomicBool>> = LazyLock::new(|| Arc::new(AtomicBool::new(false)));
 
@@ -488,6 +488,7 @@ impl Trainer {
             {
                 let result = self.evaluate_now()?;
                 self.state.evals_done = self.state.env_steps / c.eval_every;
+                bar.set_position(self.state.env_steps);
                 bar.set_message(format!(
                     "eval {:.1} ± {:.1}",
                     result.return_mean, result.return_std
