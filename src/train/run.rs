@@ -474,6 +474,7 @@ impl Trainer {
                 });
             }
             self.state.env_steps += c.envs as u64;
+            bar.set_position(self.state.env_steps);
             self.state.wall_seconds = wall_at_start + session_start.elapsed().as_secs_f64();
             if self.state.env_steps >= c.warmup_steps {
                 self.state.update_debt += c.envs as f64 * c.updates_per_step;
@@ -488,7 +489,6 @@ impl Trainer {
             {
                 let result = self.evaluate_now()?;
                 self.state.evals_done = self.state.env_steps / c.eval_every;
-                bar.set_position(self.state.env_steps);
                 bar.set_message(format!(
                     "eval {:.1} ± {:.1}",
                     result.return_mean, result.return_std
@@ -507,7 +507,6 @@ impl Trainer {
                     env_steps: self.state.env_steps,
                 });
             }
-            bar.set_position(self.state.env_steps);
         }
         bar.finish();
         Ok(TrainSummary {
