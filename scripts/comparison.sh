@@ -9,22 +9,31 @@
 #      lifting-ip   d2hpg on InvertedPendulum, Δ = 10, 25k steps: λ ∈ {0.1, 1, 10, 100} at K = 10,
 #                   K ∈ {2, 5, 20} at λ = 1, and λ = 10 with K = 2
 #      lifting-hc   the same settings on HalfCheetah, Δ = 10, 50k steps
+#      principled-choices
+#                   d2hpg-principled on InvertedPendulum, Δ = 10, actuator noise σ = 0.2, 25k
+#                   steps, with each of HPG's three departures from the paper's L_lax alone (the
+#                   paper's own are principled-ip's runs at σ = 0.2)
+#      principled-ip  d2hpg-principled, d2hpg and bpql on InvertedPendulum, Δ = 10, 25k steps,
+#                   without noise, with actuator noise σ = 0.1 and 0.2, and under random delays
+#                   in 1..=10 (conservative agent)
+#      principled-hc  the same on HalfCheetah, 50k steps
 #
 # Every run learns on one thread (RAYON_NUM_THREADS=1), N runs at a time (default: the number of
 # cores). A run folder that already exists is continued with `dhrl train --resume`, so the script
 # can be stopped and started again; a finished run is left as it is. --algos keeps only the
-# named algorithms of the set (ip-delay5 and hc-delay10). The plot goes to
-# DIR/SET.svg (DIR defaults to runs/), with the final-return table printed beside it.
+# named algorithms of the set (ip-delay5, hc-delay10, principled-ip, principled-hc). The plot
+# goes to DIR/SET.svg (DIR defaults to runs/), with the final-return table printed beside it.
+# DHRL_BIN=PATH runs that program instead of building and running the checkout's.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
-usage() { sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
 [[ $# -ge 1 ]] || usage
 set_name=$1
 shift
 case $set_name in
-    ip-delay5 | hc-delay10 | lifting-ip | lifting-hc) ;;
-    *) echo "comparison.sh: unknown set '$set_name' (accepted: ip-delay5, hc-delay10, lifting-ip, lifting-hc)" >&2; exit 2 ;;
+    ip-delay5 | hc-delay10 | lifting-ip | lifting-hc | principled-choices | principled-ip | principled-hc) ;;
+    *) echo "comparison.sh: unknown set '$set_name' (accepted: ip-delay5, hc-delay10, lifting-ip, lifting-hc, principled-choices, principled-ip, principled-hc)" >&2; exit 2 ;;
 esac
 jobs=$(nproc)
 seeds="0 1 2"
@@ -62,15 +71,35 @@ plan() {
                     set -- $setting
                     echo "lift-$prefix-w$1-k$2-s$seed --task $task --algo d2hpg --delay 10 --lifting-weight $1 --lifting-samples $2 $extra --seed $seed"
                 done ;;
+            principled-choices)
+                for setting in "mean metric_reduction=mean" "huber distance=huber" \
+                    "stop stop_transition_gradient=true"; do
+                    set -- $setting
+                    echo "choice-$1-s$seed --task inverted-pendulum --algo d2hpg-principled --delay 10 --actuator-noise 0.2 --warmup zeros --steps 25000 --eval-every 2500 --seed $seed --set $2"
+                done ;;
+            principled-ip | principled-hc)
+                local task=inverted-pendulum prefix=ip extra="--warmup zeros --steps 25000 --eval-every 2500"
+                if [[ $set_name == principled-hc ]]; then task=half-cheetah prefix=hc extra="--steps 50000 --eval-every 5000"; fi
+                for condition in "none --delay 10" "noise0.1 --delay 10 --actuator-noise 0.1" \
+                    "noise0.2 --delay 10 --actuator-noise 0.2" "random --random-delay --max-delay 10"; do
+                    set -- $condition
+                    local name=$1
+                    shift
+                    for algo in ${algos:-d2hpg-principled d2hpg bpql}; do
+                        echo "$prefix-$algo-$name-s$seed --task $task --algo $algo $* $extra --seed $seed"
+                    done
+                done ;;
         esac
     done
 }
 
 lines=$(plan)
-dhrl=target/release/dhrl
+# DHRL_BIN names a dhrl program built before (so that rebuilding the checkout cannot change the
+# program under runs in flight); by default the checkout's, built first.
+dhrl=${DHRL_BIN:-target/release/dhrl}
 if ! $dry_run; then
     scripts/setup.sh
-    cargo build --release --quiet
+    [[ -n ${DHRL_BIN:-} ]] || cargo build --release --quiet
     mkdir -p "$runs"
 fi
 

@@ -9,7 +9,7 @@ mod common;
 use std::sync::Mutex;
 
 use burn::prelude::*;
-use common::{parameters, update};
+use common::{parameters, small_spec as spec, update};
 use dhrl::algos::{
     ActMode, Agent, AgentSpec, Bpql, D2hpg, D2hpgConfig, InputView, Regular, SacAgent, SacConfig,
     SacLearner, random_batch,
@@ -51,16 +51,6 @@ fn lifting_loss_matches_hand_values() {
         actions(abstract_, 3, 2, 2, &d.plain),
     );
     assert!((to_vec(loss)[0] - 4.5).abs() < 1e-4);
-}
-
-fn spec(delay: usize) -> AgentSpec {
-    AgentSpec {
-        obs_dim: 3,
-        act_dim: 2,
-        delay,
-        action_low: vec![-1.0, -2.0],
-        action_high: vec![1.0, 2.0],
-    }
 }
 
 /// D2HPG's defaults with lifting weight λ and K samples.

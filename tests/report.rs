@@ -157,7 +157,17 @@ steps = 1000
     // 9 pairs per task is a win (30 + 10i > 10j for i, j in 0..3), so P = 1, in every resample.
     let aggregate = std::fs::read_to_string(out.join("aggregate.csv")).unwrap();
     assert!(
-        aggregate.contains("probability_of_improvement,5,d2hpg,bpql,,1.000000,1.000000,1.000000"),
+        aggregate.contains(
+            "probability_of_improvement,5,fixed,0,d2hpg,bpql,,1.000000,1.000000,1.000000"
+        ),
+        "{aggregate}"
+    );
+    // Under actuator noise σ = 0.05 every run ends 5 lower: still a win in every pair, stated
+    // as a condition of its own.
+    assert!(
+        aggregate.contains(
+            "probability_of_improvement,5,fixed,0.05,d2hpg,bpql,,1.000000,1.000000,1.000000"
+        ),
         "{aggregate}"
     );
     // IQM of BPQL at Δ 5: 6 normalised scores, the middle 4 (⌊6/4⌋ = 1 cut each end).
@@ -168,7 +178,7 @@ steps = 1000
     scores.sort_by(f64::total_cmp);
     let expected = scores[1..5].iter().sum::<f64>() / 4.0;
     assert!(
-        aggregate.contains(&format!("iqm,5,bpql,,6,{expected:.6},")),
+        aggregate.contains(&format!("iqm,5,fixed,0,bpql,,6,{expected:.6},")),
         "{expected:.6} in {aggregate}"
     );
 
@@ -179,10 +189,11 @@ steps = 1000
         returns.starts_with("algorithm,task,delay,delay_kind,actuator_noise,seed,step,return\n")
     );
 
-    // The figures: curves per task × Δ, noise, runtime; each SVG with its PNG.
+    // The figures: curves per task × condition, noise, runtime; each SVG with its PNG.
     for name in [
         "curves-hopper-d5",
         "curves-inverted-pendulum-d5",
+        "curves-hopper-d5-noise0.05",
         "noise",
         "runtime",
     ] {

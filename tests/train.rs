@@ -156,8 +156,9 @@ fn eval_options_keep_the_runs_other_delay_settings() {
 
 #[test]
 fn killed_run_resumes_to_the_uninterrupted_run() {
-    // augmented-sac: one learner; d2hpg: two learners and the lifting noise in one checkpoint.
-    for algo in ["augmented-sac", "d2hpg"] {
+    // augmented-sac: one learner; d2hpg: two learners and the lifting noise in one checkpoint;
+    // d2hpg-principled: two learners, the homomorphism with its Adam and two noise streams.
+    for algo in ["augmented-sac", "d2hpg", "d2hpg-principled"] {
         let dir = tempfile::tempdir().unwrap();
         let (whole, killed) = (dir.path().join("whole"), dir.path().join("killed"));
         let with_out = |out: &Path| {
@@ -351,15 +352,7 @@ fn every_delayed_algorithm_trains_on_every_task_and_delay_option() {
         &["--delay", "2", "--actuator-noise", "0.1"],
         &["--delay", "2", "--warmup", "random"],
     ];
-    let algos = [
-        "naive-sac",
-        "augmented-sac",
-        "delayed-sac",
-        "vdpo",
-        "bpql",
-        "d2hpg-naive",
-        "d2hpg",
-    ];
+    let algos = dhrl::algos::names_where(|info| !info.undelayed_only);
     let tasks = [
         "ant",
         "half-cheetah",

@@ -48,21 +48,30 @@ crate::algo_config! {
 impl Config {
     fn check(&self, algo: &'static str) -> Result<(), AlgoError> {
         self.sac.check(algo)?;
-        check(
-            self.lifting_weight >= 0.0 && self.lifting_weight.is_finite(),
-            algo,
-            "lifting_weight",
-            "a finite number ≥ 0",
-            self.lifting_weight,
-        )?;
-        check(
-            self.lifting_samples >= 2,
-            algo,
-            "lifting_samples",
-            "at least 2 (standard deviations need two samples)",
-            self.lifting_samples,
-        )
+        check_lifting(algo, self.lifting_weight, self.lifting_samples)
     }
+}
+
+/// Checks λ and K, naming `algo` in the errors (principled D2HPG's lifting loss too).
+pub(super) fn check_lifting(
+    algo: &'static str,
+    lifting_weight: f64,
+    lifting_samples: usize,
+) -> Result<(), AlgoError> {
+    check(
+        lifting_weight >= 0.0 && lifting_weight.is_finite(),
+        algo,
+        "lifting_weight",
+        "a finite number ≥ 0",
+        lifting_weight,
+    )?;
+    check(
+        lifting_samples >= 2,
+        algo,
+        "lifting_samples",
+        "at least 2 (standard deviations need two samples)",
+        lifting_samples,
+    )
 }
 
 /// What both variants declare, but for their names.

@@ -11,6 +11,7 @@ mod augmented_sac;
 mod bpql;
 mod context;
 mod d2hpg;
+mod d2hpg_principled;
 mod delayed_sac;
 mod naive_sac;
 mod registry;
@@ -25,6 +26,11 @@ pub use agent::{
 pub use bpql::Bpql;
 pub use context::UpdateContext;
 pub use d2hpg::{Config as D2hpgConfig, D2hpg, Regular};
+pub use d2hpg_principled::{
+    AbstractReward, Config as D2hpgPrincipledConfig, D2hpgPrincipled, Distance, Homomorphism,
+    LaxMetric, MetricReduction, RegularCritic, TransitionLoss, abstract_model_loss, gaussian_w2,
+    lax_loss,
+};
 pub use registry::{
     ALGORITHMS, Algorithm, AnyConfig, Registered, algorithm, names, names_where, paper_name,
     proposed, reference,

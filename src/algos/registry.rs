@@ -3,7 +3,7 @@
 use std::marker::PhantomData;
 
 use super::agent::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, FieldDoc, Role};
-use super::{augmented_sac, bpql, d2hpg, delayed_sac, naive_sac, sac, vdpo};
+use super::{augmented_sac, bpql, d2hpg, d2hpg_principled, delayed_sac, naive_sac, sac, vdpo};
 use crate::learn::Devices;
 
 /// Every algorithm, one line each: the registry.
@@ -16,6 +16,7 @@ pub static ALGORITHMS: &[&dyn Algorithm] = &[
     &Registered::<bpql::Config>::new(),
     &Registered::<d2hpg::NaiveConfig>::new(),
     &Registered::<d2hpg::Config>::new(),
+    &Registered::<d2hpg_principled::Config>::new(),
 ];
 
 /// The registered algorithm called `name`.

@@ -1,7 +1,7 @@
 //! Standard normal noise drawn on the host from a seeded stream, so that a run's randomness
 //! is reproducible, independent of the backend, and saved in checkpoints.
 use burn::prelude::{Device, Tensor};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
@@ -29,6 +29,11 @@ impl Noise {
             burn::prelude::TensorData::new(values, [k, rows, cols]),
             device,
         )
+    }
+
+    /// A uniform draw from `0..n` (`n` ≥ 1).
+    pub fn below(&mut self, n: usize) -> usize {
+        self.rng.random_range(0..n)
     }
 
     /// A `[rows, cols]` tensor of independent N(0, 1) draws.

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use super::ReportError;
 use super::normalised;
-use super::results::RunResult;
+use super::results::{Condition, RunResult};
 use super::stats::mean_std;
 use crate::algos::{Role, names, names_where, paper_name};
 use crate::charts::{CategorySeries, Labels, Line, category_chart, line_chart, svg_to_png};
@@ -42,26 +42,30 @@ pub fn all(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> 
     Ok(files)
 }
 
-/// One chart per task and Δ of the fixed-delay runs: a curve per algorithm, the delay-free
-/// reference of the task included.
+/// One chart per task and condition under a delay: a curve per algorithm, with the task's
+/// delay-free reference beside Table 1's (fixed Δ, no noise) conditions.
 fn learning_curves(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
-    let table: Vec<&RunResult> = runs.iter().filter(|r| r.condition.is_table1()).collect();
-    let cells: BTreeSet<(TaskName, usize)> = table
+    let mut cells: Vec<(TaskName, Condition)> = runs
         .iter()
         .filter(|r| r.condition.delay > 0)
-        .map(|r| (r.task, r.condition.delay))
+        .map(|r| (r.task, r.condition))
         .collect();
+    cells.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.order(&b.1)));
+    cells.dedup();
     let mut files = Vec::new();
-    for (task, delay) in cells {
+    for (task, condition) in cells {
         let curves: Vec<_> = names()
             .into_iter()
             .filter_map(|algorithm| {
-                let members: Vec<_> = table
+                let members: Vec<_> = runs
                     .iter()
                     .filter(|r| {
                         r.task == task
                             && r.algorithm == algorithm
-                            && (r.condition.delay == delay || r.condition.delay == 0)
+                            && (r.condition == condition
+                                || (condition.is_table1()
+                                    && r.condition.is_table1()
+                                    && r.condition.delay == 0))
                     })
                     .map(|r| (r.seed, r.evals.clone()))
                     .collect();
@@ -69,10 +73,12 @@ fn learning_curves(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, Repor
                     .then(|| curve_summary(paper_name(algorithm).to_string(), &members))
             })
             .collect();
-        let title = format!("{} at Δ = {delay}", task.gymnasium_id());
-        files.extend(figure(out, &format!("curves-{task}-d{delay}"), |svg| {
-            Ok(plot_curves(&curves, &title, svg)?)
-        })?);
+        let title = format!("{} at {}", task.gymnasium_id(), condition.label());
+        files.extend(figure(
+            out,
+            &format!("curves-{task}-{}", condition.slug()),
+            |svg| Ok(plot_curves(&curves, &title, svg)?),
+        )?);
     }
     Ok(files)
 }

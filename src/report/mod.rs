@@ -4,11 +4,11 @@
 //!
 //! Returns are normalised per task by the paper's delay-free SAC return on that task (Table 1's
 //! first row): 1.0 is what SAC reaches without delay in the paper, so a normalised score says
-//! how much of the undelayed performance an agent keeps under delay. The aggregate is the IQM
-//! of those scores over every run of every task with a 95% stratified-bootstrap interval, and
-//! the probability that D2HPG's final return beats each baseline's (per task, over run pairs,
-//! then averaged over tasks), with its interval.
-use std::collections::BTreeSet;
+//! how much of the undelayed performance an agent keeps under delay. The aggregate, per
+//! condition (Δ, and actuator noise or random delays), is the IQM of those scores over every
+//! run of every task with a 95% stratified-bootstrap interval, and the probability that D2HPG's
+//! final return beats each other algorithm's (per task, over run pairs, then averaged over
+//! tasks), with its interval.
 use std::path::{Path, PathBuf};
 
 mod figures;
@@ -52,10 +52,10 @@ pub fn normalised(task: TaskName, final_return: f64) -> f64 {
     final_return / reference.mean
 }
 
-/// One row of the aggregate: an algorithm's IQM at a Δ, over `tasks`.
+/// One row of the aggregate: an algorithm's IQM under a condition, over `tasks`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IqmRow {
-    pub delay: usize,
+    pub condition: Condition,
     pub algorithm: &'static str,
     pub tasks: Vec<TaskName>,
     pub runs: usize,
@@ -63,10 +63,11 @@ pub struct IqmRow {
     pub interval: (f64, f64),
 }
 
-/// The probability that the paper's method's final return beats a baseline's at a Δ.
+/// The probability that the paper's method's final return beats a baseline's under a
+/// condition.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImprovementRow {
-    pub delay: usize,
+    pub condition: Condition,
     /// The paper's method (`algos::proposed`).
     pub algorithm: &'static str,
     pub baseline: &'static str,
@@ -74,65 +75,66 @@ pub struct ImprovementRow {
     pub interval: (f64, f64),
 }
 
-/// Normalised final returns of `algorithm` at `delay` (fixed, no noise), one list per task.
-fn strata(runs: &[RunResult], algorithm: &str, delay: usize, tasks: &[TaskName]) -> Strata {
+/// Normalised final returns of `algorithm` under `condition`, one list per task.
+fn strata(
+    runs: &[RunResult],
+    algorithm: &str,
+    condition: &Condition,
+    tasks: &[TaskName],
+) -> Strata {
     tasks
         .iter()
         .map(|&task| {
             runs.iter()
-                .filter(|r| {
-                    r.condition.is_table1()
-                        && r.condition.delay == delay
-                        && r.algorithm == algorithm
-                        && r.task == task
-                })
+                .filter(|r| r.condition == *condition && r.algorithm == algorithm && r.task == task)
                 .map(|r| normalised(task, r.final_eval().1))
                 .collect()
         })
         .collect()
 }
 
-/// Per Δ > 0 of the fixed-delay runs: every algorithm's IQM over the tasks that every
-/// algorithm at that Δ has runs on, and D2HPG's probability of improvement over each other.
+/// Per condition under a delay (Table 1's fixed Δ, and those with actuator noise or random
+/// delays): every algorithm's IQM over the tasks that every algorithm under it has runs on, and
+/// D2HPG's probability of improvement over each other.
 pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<ImprovementRow>) {
-    let table: Vec<&RunResult> = runs.iter().filter(|r| r.condition.is_table1()).collect();
-    let delays: BTreeSet<usize> = table
+    let mut conditions: Vec<Condition> = runs
         .iter()
-        .map(|r| r.condition.delay)
-        .filter(|&d| d > 0)
+        .map(|r| r.condition)
+        .filter(|c| c.delay > 0)
         .collect();
+    conditions.sort_by(Condition::order);
+    conditions.dedup();
     let (mut iqms, mut improvements) = (Vec::new(), Vec::new());
-    for delay in delays {
+    for (c, condition) in conditions.iter().enumerate() {
+        let under = |r: &&RunResult| r.condition == *condition;
         let algorithms: Vec<&'static str> = names()
             .into_iter()
-            .filter(|a| {
-                table
-                    .iter()
-                    .any(|r| r.algorithm == *a && r.condition.delay == delay)
-            })
+            .filter(|a| runs.iter().filter(under).any(|r| r.algorithm == *a))
             .collect();
         let tasks: Vec<TaskName> = TaskName::ALL
             .into_iter()
             .filter(|&t| {
                 algorithms.iter().all(|a| {
-                    table
-                        .iter()
-                        .any(|r| r.algorithm == *a && r.condition.delay == delay && r.task == t)
+                    runs.iter()
+                        .filter(under)
+                        .any(|r| r.algorithm == *a && r.task == t)
                 })
             })
             .collect();
         if tasks.is_empty() {
             continue;
         }
+        // Resampling streams: one per condition and algorithm (pair).
+        let stream = (c * 100 + condition.delay) as u64;
         for (k, &algorithm) in algorithms.iter().enumerate() {
-            let scores = strata(runs, algorithm, delay, &tasks);
+            let scores = strata(runs, algorithm, condition, &tasks);
             iqms.push(IqmRow {
-                delay,
+                condition: *condition,
                 algorithm,
                 tasks: tasks.clone(),
                 runs: scores.iter().map(Vec::len).sum(),
                 iqm: iqm_of_strata(&scores),
-                interval: bootstrap_interval(&[&scores], reps, (delay * 100 + k) as u64, |g| {
+                interval: bootstrap_interval(&[&scores], reps, stream * 100 + k as u64, |g| {
                     iqm_of_strata(&g[0])
                 }),
             });
@@ -141,21 +143,21 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
         if !algorithms.contains(&proposed) {
             continue;
         }
-        let ours = strata(runs, proposed, delay, &tasks);
+        let ours = strata(runs, proposed, condition, &tasks);
         for (k, &baseline) in algorithms.iter().enumerate() {
             if baseline == proposed {
                 continue;
             }
-            let theirs = strata(runs, baseline, delay, &tasks);
+            let theirs = strata(runs, baseline, condition, &tasks);
             improvements.push(ImprovementRow {
-                delay,
+                condition: *condition,
                 algorithm: proposed,
                 baseline,
                 probability: probability_of_improvement(&ours, &theirs),
                 interval: bootstrap_interval(
                     &[&ours, &theirs],
                     reps,
-                    (delay * 1000 + k) as u64,
+                    stream * 1000 + k as u64,
                     |g| probability_of_improvement(&g[0], &g[1]),
                 ),
             });
@@ -168,14 +170,14 @@ fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: us
     let mut out = format!(
         "Normalised score: final return / the return of Table 1's {} on the task. IQM over \
          every run of the tasks listed; 95% stratified-bootstrap intervals ({reps} resamples).\n\n\
-         | Δ | algorithm | tasks | runs | IQM | 95% interval |\n|---|---|---|---:|---:|---|\n",
+         | condition | algorithm | tasks | runs | IQM | 95% interval |\n|---|---|---|---:|---:|---|\n",
         reference().paper_name
     );
     for row in iqms {
         let tasks: Vec<String> = row.tasks.iter().map(|t| t.to_string()).collect();
         out += &format!(
             "| {} | {} | {} | {} | {:.3} | [{:.3}, {:.3}] |\n",
-            row.delay,
+            row.condition.label(),
             paper_name(row.algorithm),
             tasks.join(", "),
             row.runs,
@@ -186,13 +188,13 @@ fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: us
     }
     if let Some(first) = improvements.first() {
         out += &format!(
-            "\n| Δ | P({} > baseline) | baseline | 95% interval |\n|---|---:|---|---|\n",
+            "\n| condition | P({} > baseline) | baseline | 95% interval |\n|---|---:|---|---|\n",
             paper_name(first.algorithm)
         );
         for row in improvements {
             out += &format!(
                 "| {} | {:.3} | {} | [{:.3}, {:.3}] |\n",
-                row.delay,
+                row.condition.label(),
                 row.probability,
                 paper_name(row.baseline),
                 row.interval.0,
@@ -204,17 +206,30 @@ fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: us
 }
 
 fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
-    let mut out = String::from("statistic,delay,algorithm,baseline,runs,value,low,high\n");
+    let mut out = String::from(
+        "statistic,delay,delay_kind,actuator_noise,algorithm,baseline,runs,value,low,high\n",
+    );
+    let condition = |c: &Condition| format!("{},{},{}", c.delay, c.delay_kind(), c.actuator_noise);
     for r in iqms {
         out += &format!(
             "iqm,{},{},,{},{:.6},{:.6},{:.6}\n",
-            r.delay, r.algorithm, r.runs, r.iqm, r.interval.0, r.interval.1
+            condition(&r.condition),
+            r.algorithm,
+            r.runs,
+            r.iqm,
+            r.interval.0,
+            r.interval.1
         );
     }
     for r in improvements {
         out += &format!(
             "probability_of_improvement,{},{},{},,{:.6},{:.6},{:.6}\n",
-            r.delay, r.algorithm, r.baseline, r.probability, r.interval.0, r.interval.1
+            condition(&r.condition),
+            r.algorithm,
+            r.baseline,
+            r.probability,
+            r.interval.0,
+            r.interval.1
         );
     }
     out

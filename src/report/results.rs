@@ -24,6 +24,41 @@ impl Condition {
     pub fn delay_kind(&self) -> &'static str {
         if self.random_delay { "random" } else { "fixed" }
     }
+
+    /// How tables and figure titles name it: `Δ = 10`, `Δ = 10, σ = 0.1`, `random Δ ≤ 10`.
+    pub fn label(&self) -> String {
+        let delay = if self.random_delay {
+            format!("random Δ ≤ {}", self.delay)
+        } else {
+            format!("Δ = {}", self.delay)
+        };
+        if self.actuator_noise > 0.0 {
+            format!("{delay}, σ = {}", self.actuator_noise)
+        } else {
+            delay
+        }
+    }
+
+    /// How file names carry it: `d10`, `d10-noise0.1`, `random-d10`.
+    pub fn slug(&self) -> String {
+        let delay = if self.random_delay {
+            format!("random-d{}", self.delay)
+        } else {
+            format!("d{}", self.delay)
+        };
+        if self.actuator_noise > 0.0 {
+            format!("{delay}-noise{}", self.actuator_noise)
+        } else {
+            delay
+        }
+    }
+
+    /// Fixed delays before random ones, then by Δ, then by σ.
+    pub fn order(&self, other: &Condition) -> std::cmp::Ordering {
+        (self.random_delay, self.delay)
+            .cmp(&(other.random_delay, other.delay))
+            .then(self.actuator_noise.total_cmp(&other.actuator_noise))
+    }
 }
 
 /// One run's evaluations.

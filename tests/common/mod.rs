@@ -8,7 +8,7 @@ use std::process::Command;
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::prelude::Tensor;
-use dhrl::algos::{Agent, Stats, UpdateContext};
+use dhrl::algos::{Agent, AgentSpec, Stats, UpdateContext};
 use dhrl::delay::Transitions;
 use dhrl::learn::to_vec;
 
@@ -23,6 +23,18 @@ pub fn parameters<M: Module>(module: &M) -> Vec<f32> {
     let mut all = Collect(Vec::new());
     module.visit(&mut all);
     all.0
+}
+
+/// Small agent sizes for the learners' tests: 3 observation entries, 2 action dimensions with
+/// unequal bounds, a delay Δ.
+pub fn small_spec(delay: usize) -> AgentSpec {
+    AgentSpec {
+        obs_dim: 3,
+        act_dim: 2,
+        delay,
+        action_low: vec![-1.0, -2.0],
+        action_high: vec![1.0, 2.0],
+    }
 }
 
 /// One update of `agent` from exactly `batch`.
