@@ -93,7 +93,7 @@ fn lax_loss_matches_hand_values_on_two_pairs() {
             &metric,
         ))[0]
     };
-    // Eq. 4: d_x̄ = |0 − 1| + |0 + 2| = 3; d_r = 0.5; W₂ = 5: (3 − (0.5 + 0.9·5))² = 4.
+    // Eq. 2: d_x̄ = |0 − 1| + |0 + 2| = 3; d_r = 0.5; W₂ = 5: (3 − (0.5 + 0.9·5))² = 4.
     close(
         loss(metric(MetricReduction::Sum, Distance::L1, false)),
         4.0,
@@ -177,7 +177,7 @@ fn abstract_model_loss_matches_hand_values() {
         0.5 + 2f64.ln() + 0.49,
         "L_h, Gaussian NLL",
     );
-    // Eq. 6: the sample (0.5, −1) against (1, 1): 0.25 + 4, plus 0.49.
+    // Eq. 3: the sample (0.5, −1) against (1, 1): 0.25 + 4, plus 0.49.
     close(
         loss(TransitionLoss::SampleSquared),
         4.74,
@@ -197,24 +197,35 @@ fn lifting_loss_through_a_linear_action_map_matches_hand_values() {
             bias: Some(Param::from_data([0.1f32], &d.train)),
         }],
     };
-    // One state x = 1 and K = 2 regular actions {0.2, 0.6}; the abstract policy's {0.5, 0.5}.
-    let x = m(&[1.0], 1, &d.plain);
-    let actions = Tensor::<3>::from_data(TensorData::new(vec![0.2f32, 0.6], [2, 1, 1]), &d.plain);
-    let lifted = h.valid().abstract_actions_k(x, actions);
-    let (g1, g2) = ((0.5f64 + 0.2 + 0.1).tanh(), (0.5f64 + 0.6 + 0.1).tanh());
-    let found = to_vec(lifted.clone());
-    close(found[0], g1, "g_ω(x, a_1)");
-    close(found[1], g2, "g_ω(x, a_2)");
-    let abstract_actions =
-        Tensor::<3>::from_data(TensorData::new(vec![0.5f32, 0.5], [2, 1, 1]), &d.plain);
-    // ‖E[g] − E[ā]‖² + ‖σ[g] − σ[ā]‖², σ with the N − 1 correction: σ[g] = |g1 − g2|/√2,
-    // σ[ā] = 0 (its floor, 1e-6).
-    let mean = (g1 + g2) / 2.0;
-    let std = (g1 - g2).abs() / 2f64.sqrt();
-    let by_hand = (mean - 0.5).powi(2) + (std - 1e-6).powi(2);
+    // Two states x = (1, −1), K = 2 regular actions each: {0.2, 0.6} at the first, {−0.4, 0}
+    // at the second, laid out sample by sample ([K, B, A]); the abstract policy's {0.5, 0.5}
+    // and {0.1, −0.1}.
+    let x = m(&[1.0, -1.0], 2, &d.plain);
+    let three = |v: Vec<f32>| Tensor::<3>::from_data(TensorData::new(v, [2, 2, 1]), &d.plain);
+    let lifted = h
+        .valid()
+        .abstract_actions_k(x, three(vec![0.2, -0.4, 0.6, 0.0]));
+    let g = |x: f64, a: f64| (0.5 * x + a + 0.1).tanh();
+    let by_hand = [g(1.0, 0.2), g(-1.0, -0.4), g(1.0, 0.6), g(-1.0, 0.0)];
+    for (k, (found, expected)) in to_vec(lifted.clone()).iter().zip(by_hand).enumerate() {
+        close(
+            *found,
+            expected,
+            &format!("g_ω of sample {} at state {}", k / 2, k % 2),
+        );
+    }
+    // Per state ‖E[g] − E[ā]‖² + ‖σ[g] − σ[ā]‖², σ with the N − 1 correction (|u − v|/√2 for
+    // two samples; the abstract side's σ at state 0 is its floor, 1e-6), averaged over states.
+    let term = |(g1, g2): (f64, f64), (a1, a2): (f64, f64)| {
+        let spread = |u: f64, v: f64| ((u - v).abs() / 2f64.sqrt()).max(1e-6);
+        ((g1 + g2) / 2.0 - (a1 + a2) / 2.0).powi(2) + (spread(g1, g2) - spread(a1, a2)).powi(2)
+    };
+    let expected = (term((by_hand[0], by_hand[2]), (0.5, 0.5))
+        + term((by_hand[1], by_hand[3]), (0.1, -0.1)))
+        / 2.0;
     close(
-        to_vec(lifting_loss(lifted, abstract_actions))[0],
-        by_hand,
+        to_vec(lifting_loss(lifted, three(vec![0.5, 0.1, 0.5, -0.1])))[0],
+        expected,
         "L_lift through g_ω",
     );
 }
@@ -308,7 +319,15 @@ fn every_choice_changes_the_part_it_concerns() {
         parts.iter().find(|(n, _)| *n == name).unwrap().1.clone()
     };
     let homomorphism = ["f_ξ", "g_ω", "P̄_τ", "R̄_ν"];
-    let cases: [(&str, D2hpgPrincipledConfig, &str); 5] = [
+    let cases: [(&str, D2hpgPrincipledConfig, &str); 6] = [
+        (
+            "lax_weight = 0",
+            D2hpgPrincipledConfig {
+                lax_weight: 0.0,
+                ..config(1.0)
+            },
+            "f_ξ",
+        ),
         (
             "metric_reduction = mean",
             D2hpgPrincipledConfig {

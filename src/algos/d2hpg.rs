@@ -3,7 +3,7 @@
 //! deterministic dynamics the delay-free MDP is the homomorphic image of the delayed one
 //! (Prop. 4.2), so the abstract policy and critic are a delay-free SAC trained on the
 //! time-aligned `(s, a, r, s')` of the replay, and the regular policy on `x` is pulled toward
-//! it by the lifting loss (Eq. 5).
+//! it by the lifting loss (Eq. 4).
 //!
 //! One update, top to bottom:
 //! 1. both critics step: the regular learner's beta critic on `s` (BPQL, see `bpql.rs`; not
@@ -253,7 +253,7 @@ impl Agent for D2hpg {
         // 2. The delay-free policy's squashed actions at s, K per state, from its distribution
         //    before this update, held fixed. The regular policy's K samples reuse the same ε
         //    (common random numbers): the two sets of moments are then equal exactly when the
-        //    two distributions are. L_lift (Eq. 5) is logged unweighted.
+        //    two distributions are. L_lift (Eq. 4) is logged unweighted.
         let eps = self.lifting_noise.normal3(k, rows, act, &plain);
         let (free_mean, free_log_std) = free_distribution.clone();
         let free_actions = squashed_samples_k(

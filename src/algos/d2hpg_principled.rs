@@ -1,5 +1,5 @@
 //! Principled D2HPG: the deep delayed homomorphic policy gradient with the homomorphism and the
-//! abstract MDP *learned*, as this repository's paper defines it (section 4.1, Eqs. 4–6, and
+//! abstract MDP *learned*, as this repository's paper defines it (section 4.1, Eqs. 2–4, and
 //! the appendix's Algorithm "D2HPG") and leaves to future work. `d2hpg.rs` is its practical
 //! instantiation, which takes the delay-free MDP for the abstract one: exact under
 //! deterministic dynamics (Prop. 4.2), an approximation under noise, where this one should
@@ -14,13 +14,17 @@
 //! One update, by the Algorithm's lines:
 //! - 22: a mini-batch, each sample paired with the one a random shift away (a permutation
 //!   with no fixed point, so no sample is paired with itself);
-//! - 23: `h`, `P̄_τ` and `R̄_ν` take one Adam step on `lax_weight·L_lax + L_h`;
+//! - 23: `h`, `P̄_τ` and `R̄_ν` take one Adam step on `lax_weight·L_lax + L_h`, the encoded
+//!   next state `f(x')` in L_h held fixed (as both reference codes do); each loss reaches every
+//!   network it passes through (L_h reaches `f_ξ` and `g_ω` through `P̄_τ`'s and `R̄_ν`'s
+//!   inputs), as the line's joint training reads;
 //! - 24: both critics step: the regular one on the replay's `(s or x, a, r̃, s' or x')`, the
 //!   abstract one on `(f(x), g(x, a), R̄(f(x), g(x, a)), f(x'))` from the `h` just updated,
 //!   held fixed;
 //! - 25 and 27: the regular policy takes BPQL's actor step (the Algorithm's optional line,
 //!   `regular_policy_step`) with `λ·L_lift` in the same loss; the lifting gradient reaches θ
-//!   through `g_ω`, which it does not move;
+//!   through `g_ω`, which it does not move, and the abstract side of `L_lift(θ, θ')` is held
+//!   fixed (as `d2hpg` holds the delay-free side);
 //! - 26: the abstract policy takes SAC's actor step on `Q_φ2`: the homomorphic policy gradient;
 //! - 28: temperatures and target critics.
 //!
@@ -29,8 +33,9 @@
 //!
 //! Where the paper is silent or the reference code of the stochastic homomorphic policy
 //! gradient (HPG, Rezaei-Shoshtari et al.) differs from it, the choice is a field below. The
-//! defaults follow the paper's equations, except `transition_loss` (see its field) and where a
-//! measurement decided (docs/experiments.md, "Principled D2HPG").
+//! defaults follow the paper's equations, except `transition_loss` (see its field) and
+//! `regular_critic` (BPQL's critic on `s`, as `d2hpg`, where `L_regular-critic` reads `Q(x, a)`).
+//! No default has been decided by a measurement yet (docs/experiments.md, "Principled D2HPG").
 use std::path::Path;
 
 use burn::module::Module;
@@ -56,7 +61,7 @@ use crate::seeds;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MetricReduction {
-    /// Over all dimensions at once (Eq. 4): `‖x̄_i − x̄_j‖₁` and the closed-form
+    /// Over all dimensions at once (Eq. 2): `‖x̄_i − x̄_j‖₁` and the closed-form
     /// `W₂ = √(‖μ_i − μ_j‖² + ‖σ_i − σ_j‖²)`.
     Sum,
     /// Per dimension, then averaged (HPG's code): `mean_k d(x̄_ik, x̄_jk)` and
@@ -68,7 +73,7 @@ pub enum MetricReduction {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Distance {
-    /// `|u − v|` (Eq. 4).
+    /// `|u − v|` (Eq. 2).
     L1,
     /// Huber's with threshold 1, `½(u − v)²` below it and `|u − v| − ½` above (HPG's
     /// smooth-L1).
@@ -82,7 +87,7 @@ pub enum TransitionLoss {
     /// The Gaussian's negative log-likelihood of `f(x')`, `Σ_k ½((μ_k − x̄'_k)/σ_k)² + ln σ_k`
     /// (both reference codes).
     GaussianNll,
-    /// Eq. 6 as written: `‖f(x') − x̄_{i+1}‖²` with `x̄_{i+1} = μ + σ·ε` drawn from `P̄_τ`.
+    /// Eq. 3 as written: `‖f(x') − x̄_{i+1}‖²` with `x̄_{i+1} = μ + σ·ε` drawn from `P̄_τ`.
     /// Its expectation is `‖f(x') − μ‖² + ‖σ‖²`, minimised by σ at its floor whatever the
     /// dynamics' noise, so `W₂` would measure the means only.
     SampleSquared,
@@ -121,15 +126,17 @@ crate::algo_config! {
         pub homomorphism_hidden: Vec<usize> = vec![256, 256],
         /// Weight of L_lax beside L_h in the homomorphism's loss (the Algorithm's line 23: 1).
         pub lax_weight: f64 = 1.0,
-        /// How L_lax reduces over latent dimensions: "sum" (Eq. 4) or "mean" (HPG's
+        /// How L_lax reduces over latent dimensions: "sum" (Eq. 2) or "mean" (HPG's
         /// per-dimension W₂ and distances).
         pub metric_reduction: MetricReduction = MetricReduction::Sum,
-        /// The distance of abstract states and rewards in L_lax: "l1" (Eq. 4) or "huber".
+        /// The distance of abstract states and rewards in L_lax: "l1" (Eq. 2) or "huber".
         pub distance: Distance = Distance::L1,
-        /// Hold the abstract transition fixed inside L_lax's target (HPG's code); false lets
-        /// L_lax move `P̄_τ`, and through it `f_ξ` and `g_ω`, as Eq. 4's L_lax(ξ, ω) reads.
+        /// Hold the abstract transition's μ and σ fixed inside L_lax's target (HPG's code):
+        /// L_lax then moves `f_ξ` through the state distance only, and `g_ω` not at all. False:
+        /// L_lax's gradient reaches `P̄_τ` and, through its inputs, `f_ξ` and `g_ω` (the
+        /// Algorithm's line 23 trains them all on L_lax + L_h; Eq. 2 names ξ and ω).
         pub stop_transition_gradient: bool = false,
-        /// L_h's transition term: "gaussian-nll" or "sample-squared" (Eq. 6 as written, which
+        /// L_h's transition term: "gaussian-nll" or "sample-squared" (Eq. 3 as written, which
         /// drives σ to its floor).
         pub transition_loss: TransitionLoss = TransitionLoss::GaussianNll,
         /// The abstract critic's reward: "model" (R̄_ν, as written) or "replay" (r̃).
@@ -314,7 +321,7 @@ impl LaxMetric {
 
 /// The 2-Wasserstein distance of diagonal Gaussians `N(μ_i, σ_i²)` and `N(μ_j, σ_j²)` row by
 /// row, `[B, 1]`. Their covariances commute, so `W₂² = ‖μ_i − μ_j‖² + ‖σ_i − σ_j‖²` (the
-/// closed form of Eq. 4, `Sum`); `Mean` averages the per-dimension distances instead.
+/// closed form of Eq. 2, `Sum`); `Mean` averages the per-dimension distances instead.
 pub fn gaussian_w2(
     (mean_i, std_i): (Tensor<2>, Tensor<2>),
     (mean_j, std_j): (Tensor<2>, Tensor<2>),
@@ -327,7 +334,7 @@ pub fn gaussian_w2(
     }
 }
 
-/// L_lax (Eq. 4) over the pairs `(i, j)` with `j` the row `shift` places before `i` (cyclically):
+/// L_lax (Eq. 2) over the pairs `(i, j)` with `j` the row `shift` places before `i` (cyclically):
 /// `mean_i (d(x̄_i, x̄_j) − (d(r̃_i, r̃_j) + γ·W₂(P̄_i, P̄_j)))²`, with `P̄_i = P̄_τ(·|x̄_i, ā_i)`
 /// given as `(μ, σ)`.
 pub fn lax_loss(
@@ -356,7 +363,7 @@ pub fn lax_loss(
         .mean()
 }
 
-/// L_h (Eq. 6): the abstract transition's fit to the encoded next state `f(x')` (a fixed
+/// L_h (Eq. 3): the abstract transition's fit to the encoded next state `f(x')` (a fixed
 /// target), summed over the latent dimensions, plus the abstract reward's `(r̄⁺ − r̃)²`,
 /// averaged over the batch. `eps` `[B, latent]` draws the sample of `SampleSquared`.
 pub fn abstract_model_loss(
@@ -468,6 +475,7 @@ impl D2hpgPrincipled {
         let rows = t.reward.dims()[0];
         // A shift in 1..rows pairs no sample with itself.
         let shift = 1 + self.model_noise.below(rows.max(2) - 1);
+        // Drawn whatever the transition loss, so that the stream does not depend on it.
         let eps = self.model_noise.normal(rows, self.config.latent_dim, plain);
         let h = &self.homomorphism;
         let state = h.abstract_state(t.augmented.clone());
@@ -590,7 +598,7 @@ impl Agent for D2hpgPrincipled {
                 },
             );
 
-        // 27. L_lift (Eq. 5): the regular policy's K actions at x, mapped by g_ω, against the
+        // 27. L_lift (Eq. 4): the regular policy's K actions at x, mapped by g_ω, against the
         //     abstract policy's K actions at x̄ = f(x), held fixed. With Ā = A both sides share
         //     ε (common random numbers, as `d2hpg`). Logged unweighted.
         let eps = self.lifting_noise.normal3(k, rows, act, &plain);
@@ -611,7 +619,7 @@ impl Agent for D2hpgPrincipled {
             .abstract_actions_k(regular_batch.actor_input.clone(), regular_actions);
         let lifting = lifting_loss(lifted, abstract_actions);
         let lifting_value = scalar(&lifting);
-        let lift = lifting.mul_scalar(self.config.lifting_weight);
+        let weighted_lifting = lifting.mul_scalar(self.config.lifting_weight);
 
         // 25–26, 28. The policies side by side: the regular one by BPQL's actor step with
         //     λ·L_lift in its loss (or λ·L_lift alone), the abstract one by SAC's actor step on
@@ -620,11 +628,15 @@ impl Agent for D2hpgPrincipled {
         let (actor_loss, (abstract_actor_loss, _)) = rayon::join(
             || {
                 if policy_step {
-                    let (loss, _) =
-                        regular.update_policy(&regular_batch, regular_distribution, Some(lift));
+                    let (loss, _) = regular.update_policy(
+                        &regular_batch,
+                        regular_distribution,
+                        Some(weighted_lifting),
+                    );
                     Some(loss)
                 } else {
-                    regular.update_actor_by(lift);
+                    // Line 24 is not optional: Q_φ1 and its targets train either way.
+                    regular.update_actor_by(weighted_lifting);
                     regular.update_targets();
                     None
                 }

@@ -95,7 +95,7 @@ pub fn polyak<M: Module>(target: M, online: &M, tau: f64) -> M {
     })
 }
 
-/// The lifting loss (Eq. 5 of the DHRL paper): the squared distance between the per-dimension
+/// The lifting loss (Eq. 4 of the DHRL paper): the squared distance between the per-dimension
 /// mean and standard deviation of the regular policy's squashed actions at `x` and those of
 /// the abstract (here: delay-free) policy at `s`, `‖E[a↑] − E[ā]‖² + ‖σ[a↑] − σ[ā]‖²`, averaged
 /// over the batch. Both sides are `[K, B, A]`: K samples per state, standard deviations with

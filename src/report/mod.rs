@@ -105,7 +105,7 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
     conditions.sort_by(Condition::order);
     conditions.dedup();
     let (mut iqms, mut improvements) = (Vec::new(), Vec::new());
-    for (c, condition) in conditions.iter().enumerate() {
+    for condition in &conditions {
         let under = |r: &&RunResult| r.condition == *condition;
         let algorithms: Vec<&'static str> = names()
             .into_iter()
@@ -124,8 +124,9 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
         if tasks.is_empty() {
             continue;
         }
-        // Resampling streams: one per condition and algorithm (pair).
-        let stream = (c * 100 + condition.delay) as u64;
+        // Resampling streams: one per condition and algorithm (pair), from the condition itself
+        // so that other runs in the report do not move its intervals.
+        let stream = resampling_stream(condition);
         for (k, &algorithm) in algorithms.iter().enumerate() {
             let scores = strata(runs, algorithm, condition, &tasks);
             iqms.push(IqmRow {
@@ -134,9 +135,12 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
                 tasks: tasks.clone(),
                 runs: scores.iter().map(Vec::len).sum(),
                 iqm: iqm_of_strata(&scores),
-                interval: bootstrap_interval(&[&scores], reps, stream * 100 + k as u64, |g| {
-                    iqm_of_strata(&g[0])
-                }),
+                interval: bootstrap_interval(
+                    &[&scores],
+                    reps,
+                    stream.wrapping_mul(100).wrapping_add(k as u64),
+                    |g| iqm_of_strata(&g[0]),
+                ),
             });
         }
         let proposed = proposed().name;
@@ -157,13 +161,24 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
                 interval: bootstrap_interval(
                     &[&ours, &theirs],
                     reps,
-                    stream * 1000 + k as u64,
+                    stream.wrapping_mul(1000).wrapping_add(k as u64),
                     |g| probability_of_improvement(&g[0], &g[1]),
                 ),
             });
         }
     }
     (iqms, improvements)
+}
+
+/// The seed of a condition's bootstrap resampling: Δ for Table 1's (fixed, noise-free), as
+/// before there were other conditions; Δ mixed with the random flag and σ's bits otherwise.
+fn resampling_stream(condition: &Condition) -> u64 {
+    let delay = condition.delay as u64;
+    if condition.is_table1() {
+        delay
+    } else {
+        delay ^ (u64::from(condition.random_delay) << 40) ^ condition.actuator_noise.to_bits()
+    }
 }
 
 fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: usize) -> String {
