@@ -32,11 +32,7 @@ impl Condition {
         } else {
             format!("Δ = {}", self.delay)
         };
-        if self.actuator_noise > 0.0 {
-            format!("{delay}, σ = {}", self.actuator_noise)
-        } else {
-            delay
-        }
+        self.with_noise(delay, ", σ = ")
     }
 
     /// How file names carry it: `d10`, `d10-noise0.1`, `random-d10`.
@@ -46,8 +42,13 @@ impl Condition {
         } else {
             format!("d{}", self.delay)
         };
+        self.with_noise(delay, "-noise")
+    }
+
+    /// `delay`, followed by `prefix` and σ where there is actuator noise.
+    fn with_noise(&self, delay: String, prefix: &str) -> String {
         if self.actuator_noise > 0.0 {
-            format!("{delay}-noise{}", self.actuator_noise)
+            format!("{delay}{prefix}{}", self.actuator_noise)
         } else {
             delay
         }
