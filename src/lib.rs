@@ -1,7 +1,11 @@
 //! dhrl: delayed homomorphic reinforcement learning on batched MuJoCo tasks.
+pub mod acting;
 pub mod algos;
 pub mod bench;
 pub mod delay;
+pub mod deploy;
+pub mod export;
+pub mod files;
 pub mod float_mode;
 pub mod learn;
 pub mod progress;

@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 
 use cli::bench::BenchCommand;
 use cli::eval::EvalArgs;
+use cli::export::ExportArgs;
 use cli::plot::PlotArgs;
 use cli::report::ReportArgs;
 use cli::rollout::RolloutArgs;
@@ -29,6 +30,8 @@ enum Command {
     Train(Box<TrainArgs>),
     /// Evaluate the saved policy of a run.
     Eval(EvalArgs),
+    /// Write a run's policy for deployment: ONNX, safetensors, a manifest and a recorded check.
+    Export(ExportArgs),
     /// Learning curves of finished runs (grouped by task, algorithm and delay) as SVG, and a
     /// table of their final evaluations.
     Plot(PlotArgs),
@@ -78,6 +81,7 @@ fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Train(args) => cli::train::run(&args),
         Command::Eval(args) => cli::eval::run(&args),
+        Command::Export(args) => cli::export::run(&args),
         Command::Plot(args) => cli::plot::run(&args),
         Command::Report(args) => cli::report::run(&args),
         Command::Rollout(args) => cli::rollout::run(&args),

@@ -946,3 +946,65 @@ fn every_train_flag_has_help() {
     }
     assert!(checked >= 20, "{checked} flags checked");
 }
+
+/// A run folder being trained is locked: `--resume` of it from a second process is refused
+/// with a message saying so (two trainers would interleave its logs and checkpoints), and
+/// goes through once the first has stopped.
+#[test]
+fn a_run_in_training_cannot_be_resumed_by_a_second_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let mut first = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args([
+            "train",
+            "--steps",
+            "1000000",
+            "--checkpoint-every",
+            "200",
+            "--out",
+        ])
+        .arg(&run)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !run.join("checkpoint/state.json").is_file() {
+        assert!(
+            start.elapsed() < Duration::from_secs(300),
+            "no checkpoint came"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let resume = || {
+        Command::new(env!("CARGO_BIN_EXE_dhrl"))
+            .args(["train", "--steps", "1000000", "--resume"])
+            .arg(&run)
+            .output()
+            .unwrap()
+    };
+    let second = resume();
+    first.kill().unwrap();
+    first.wait().unwrap();
+    assert!(!second.status.success());
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert!(
+        stderr.contains("is being trained by another dhrl process"),
+        "{stderr}"
+    );
+    // With the first gone, the lock is free: a resume starts (and is stopped here).
+    let mut third = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(["train", "--steps", "1000000", "--resume"])
+        .arg(&run)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(
+        third.try_wait().unwrap().is_none(),
+        "the resume ended early"
+    );
+    third.kill().unwrap();
+    third.wait().unwrap();
+}

@@ -6,6 +6,7 @@ use std::path::Path;
 use serde::{Serialize, de::DeserializeOwned};
 
 use super::context::UpdateContext;
+use crate::acting::ActingNetwork;
 use crate::delay::{BatchExtras, ReplayError, Transitions};
 use crate::learn::{Devices, LearnError};
 use crate::sim::{SimError, TaskModel};
@@ -78,6 +79,9 @@ pub trait Agent: Send {
     fn save(&self, dir: &Path) -> Result<(), LearnError>;
     /// Restores what [`Agent::save`] wrote.
     fn load(&mut self, dir: &Path) -> Result<(), LearnError>;
+    /// What [`Agent::act`] computes in [`ActMode::Deterministic`], as plain numbers (`dhrl
+    /// export`).
+    fn acting_network(&self) -> ActingNetwork;
 }
 
 /// `n` random transitions at `spec`'s sizes, with their intermediate states (values uniform

@@ -16,6 +16,7 @@ use burn::prelude::Device;
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats};
 use super::context::UpdateContext;
 use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats};
+use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::{ReplayError, Transitions};
 use crate::learn::{Devices, LearnError, TransitionTensors};
 
@@ -82,6 +83,13 @@ impl Agent for Bpql {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         self.learner
             .act(augmented, rows, self.spec.augmented_dim(), mode)
+    }
+
+    fn acting_network(&self) -> ActingNetwork {
+        ActingNetwork::Policy {
+            input: PolicyInput::AugmentedState,
+            policy: self.learner.actor.weights(),
+        }
     }
 
     fn stat_names(&self) -> Vec<&'static str> {

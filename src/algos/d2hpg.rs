@@ -29,6 +29,7 @@ use super::agent::{
 use super::bpql::{beta_batch, bpql_learner};
 use super::context::UpdateContext;
 use super::sac::{Config as SacConfig, SacBatch, SacLearner};
+use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{CheckpointDir, Devices, LearnError, Noise, lifting_loss, squashed_samples_k};
 use crate::seeds;
@@ -195,6 +196,13 @@ impl Agent for D2hpg {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         self.regular
             .act(augmented, rows, self.spec.augmented_dim(), mode)
+    }
+
+    fn acting_network(&self) -> ActingNetwork {
+        ActingNetwork::Policy {
+            input: PolicyInput::AugmentedState,
+            policy: self.regular.actor.weights(),
+        }
     }
 
     fn act_delay_free(&mut self, states: &[f32], rows: usize) -> Option<Vec<f32>> {

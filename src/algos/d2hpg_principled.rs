@@ -50,6 +50,7 @@ use super::agent::{
 use super::context::UpdateContext;
 use super::d2hpg::check_lifting;
 use super::sac::{Config as SacConfig, SacBatch, SacLearner};
+use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
     CheckpointDir, Devices, LearnError, Mlp, MlpConfig, Noise, TransitionTensors, adam,
@@ -541,6 +542,13 @@ impl Agent for D2hpgPrincipled {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         self.regular
             .act(augmented, rows, self.spec.augmented_dim(), mode)
+    }
+
+    fn acting_network(&self) -> ActingNetwork {
+        ActingNetwork::Policy {
+            input: PolicyInput::AugmentedState,
+            policy: self.regular.actor.weights(),
+        }
     }
 
     fn stat_names(&self) -> Vec<&'static str> {

@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, check};
 use super::context::UpdateContext;
 use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats};
+use crate::acting::{ActingNetwork, RolloutModel};
 use crate::delay::{BatchExtras, ReplayError, Transitions};
 use crate::learn::{
     CheckpointDir, Devices, LearnError, Mlp, MlpConfig, TransitionTensors, adam, materialize,
@@ -130,22 +131,23 @@ impl InputMoments {
         self.count += n;
     }
 
-    /// `(mean, std)` as `[1, width]` rows; a dimension that has not varied keeps scale 1.
-    fn tensors(&self, device: &Device) -> (Tensor<2>, Tensor<2>) {
-        let width = self.mean.len();
+    /// `(mean, std)` per input; a dimension that has not varied keeps scale 1.
+    fn mean_std(&self) -> (Vec<f32>, Vec<f32>) {
         let std = self
             .m2
             .iter()
             .map(|m2| (m2 / self.count.max(1.0)).sqrt())
             .map(|s| if s < 1e-12 { 1.0 } else { s as f32 });
+        (self.mean.iter().map(|&m| m as f32).collect(), std.collect())
+    }
+
+    /// [`InputMoments::mean_std`] as `[1, width]` rows.
+    fn tensors(&self, device: &Device) -> (Tensor<2>, Tensor<2>) {
+        let width = self.mean.len();
+        let (mean, std) = self.mean_std();
         (
-            matrix(
-                self.mean.iter().map(|&m| m as f32).collect(),
-                1,
-                width,
-                device,
-            ),
-            matrix(std.collect(), 1, width, device),
+            matrix(mean, 1, width, device),
+            matrix(std, 1, width, device),
         )
     }
 }
@@ -286,6 +288,17 @@ impl Agent for DelayedSac {
             ActMode::Explore => self.learner.explore(predicted),
             ActMode::Deterministic => self.learner.exploit(predicted),
         })
+    }
+
+    fn acting_network(&self) -> ActingNetwork {
+        ActingNetwork::ModelRollout {
+            model: RolloutModel {
+                layers: self.model.network.weights(),
+                input_moments: self.model.moments.as_ref().map(InputMoments::mean_std),
+                predicts_difference: self.model.output == ModelOutput::Difference,
+            },
+            policy: self.learner.actor.weights(),
+        }
     }
 
     fn stat_names(&self) -> Vec<&'static str> {

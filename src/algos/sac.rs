@@ -15,6 +15,7 @@ use super::agent::{
     ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Role, Stats, check,
 };
 use super::context::UpdateContext;
+use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::{ReplayError, Transitions};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, Temperature,
@@ -511,6 +512,17 @@ impl Agent for SacAgent {
         let inputs = view.from_augmented(augmented, rows, &self.spec);
         self.learner
             .act(&inputs, rows, view.width(&self.spec), mode)
+    }
+
+    fn acting_network(&self) -> ActingNetwork {
+        let input = match self.view {
+            InputView::Augmented => PolicyInput::AugmentedState,
+            InputView::TrueState | InputView::LastObservation => PolicyInput::LastObservation,
+        };
+        ActingNetwork::Policy {
+            input,
+            policy: self.learner.actor.weights(),
+        }
     }
 
     fn stat_names(&self) -> Vec<&'static str> {

@@ -48,10 +48,11 @@ use serde::{Deserialize, Serialize};
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, check};
 use super::context::UpdateContext;
 use super::sac::{Config as SacConfig, LearningRates, SacBatch, SacLearner};
+use crate::acting::{ActingNetwork, BeliefTransformer, TransformerBlock};
 use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, TransitionTensors,
-    adam, materialize, matrix, rows, to_vec,
+    adam, dense, materialize, matrix, norm, rows, to_vec,
 };
 use crate::seeds;
 
@@ -252,6 +253,38 @@ impl Belief {
     /// `ŝ_{t−Δ+1+i}` per position, `[B, Δ, obs]`.
     pub fn reconstruct(&self, features: Tensor<3>) -> Tensor<3> {
         self.decoder.forward(features)
+    }
+
+    /// What [`Belief::features`] computes, as plain numbers (for export; the decoder does
+    /// not act).
+    fn weights(&self) -> BeliefTransformer {
+        let blocks = self
+            .encoder
+            .layers
+            .iter()
+            .map(|layer| TransformerBlock {
+                attention_norm: norm(&layer.norm_2),
+                query: dense(&layer.mha.query),
+                key: dense(&layer.mha.key),
+                value: dense(&layer.mha.value),
+                attention_output: dense(&layer.mha.output),
+                feed_forward_norm: norm(&layer.norm_1),
+                feed_forward_inner: dense(&layer.pwff.linear_inner),
+                feed_forward_outer: dense(&layer.pwff.linear_outer),
+            })
+            .collect();
+        let first = &self.encoder.layers[0].mha;
+        BeliefTransformer {
+            state_embedding: dense(&self.state_embedding),
+            action_embedding: dense(&self.action_embedding),
+            token: dense(&self.token),
+            position: to_vec(self.position.weight.val()),
+            input_norm: norm(&self.input_norm),
+            blocks,
+            output_norm: norm(&self.output_norm),
+            heads: first.n_heads,
+            mask_fill: first.min_float as f32,
+        }
     }
 }
 
@@ -559,6 +592,13 @@ impl Agent for Vdpo {
             }
             ActMode::Deterministic => head.mode(h, &self.scale),
         })
+    }
+
+    fn acting_network(&self) -> ActingNetwork {
+        ActingNetwork::Belief {
+            belief: self.belief.weights(),
+            policy: self.policy_head.weights(),
+        }
     }
 
     fn act_delay_free(&mut self, states: &[f32], rows: usize) -> Option<Vec<f32>> {

@@ -2,6 +2,7 @@
 //! errors); the work itself is the library's.
 pub mod bench;
 pub mod eval;
+pub mod export;
 pub mod plot;
 pub mod report;
 pub mod rollout;

@@ -33,3 +33,4 @@ pub use layout::{
 pub use records::{RecordBatch, RecordRef, StepInput};
 pub use replay::{DEFAULT_CAPACITY, ReplayError, ReplayStore};
 pub use transitions::{BatchExtras, Transitions};
+pub use warmup::WarmupFiller;

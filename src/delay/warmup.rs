@@ -23,6 +23,11 @@ impl WarmupFiller {
         }
     }
 
+    /// Draws by `kind` from now on (the stream goes on where it is).
+    pub fn set_kind(&mut self, kind: WarmupActions) {
+        self.kind = kind;
+    }
+
     pub fn rng(&self) -> &ChaCha8Rng {
         &self.rng
     }

@@ -19,7 +19,8 @@ pub use losses::{
 };
 pub use nets::{
     ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, Mlp, MlpConfig, PolicySample,
-    QNetwork, Temperature, TwinQ, adam, materialize, squashed_sample, squashed_samples_k,
+    QNetwork, Temperature, TwinQ, adam, dense, materialize, norm, squashed_sample,
+    squashed_samples_k,
 };
 pub use noise::Noise;
 #[cfg(test)]

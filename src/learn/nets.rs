@@ -7,7 +7,8 @@ use burn::prelude::*;
 use burn::tensor::activation::{relu, sigmoid};
 
 use super::losses::squashed_gaussian_log_prob;
-use super::tensors::matrix;
+use super::tensors::{matrix, to_vec};
+use crate::acting::{Dense, GaussianPolicyWeights, Norm};
 
 /// Hidden width of every network (docs/DESIGN.md §3.3).
 pub const HIDDEN: usize = 256;
@@ -164,6 +165,41 @@ impl GaussianPolicy {
         let (mean, _) = self.distribution(input);
         mean.tanh() * scale.scale.clone() + scale.bias.clone()
     }
+
+    /// The weights as plain numbers (for export).
+    pub fn weights(&self) -> GaussianPolicyWeights {
+        GaussianPolicyWeights {
+            hidden: vec![dense(&self.trunk.l1), dense(&self.trunk.l2)],
+            mean: dense(&self.mean),
+            log_std: dense(&self.log_std),
+        }
+    }
+}
+
+/// A linear layer's weights as plain numbers, `[input, output]` (burn's layout).
+pub fn dense(layer: &Linear) -> Dense {
+    let [input, output] = layer.weight.val().dims();
+    Dense {
+        input,
+        output,
+        weight: to_vec(layer.weight.val()),
+        bias: layer
+            .bias
+            .as_ref()
+            .map_or_else(|| vec![0.0; output], |bias| to_vec(bias.val())),
+    }
+}
+
+/// A layer normalisation's scale and shift as plain numbers.
+pub fn norm(layer: &burn::nn::LayerNorm) -> Norm {
+    let scale = to_vec(layer.gamma.val());
+    Norm {
+        shift: layer
+            .beta
+            .as_ref()
+            .map_or_else(|| vec![0.0; scale.len()], |beta| to_vec(beta.val())),
+        scale,
+    }
 }
 
 /// [`GaussianPolicy::sample`] from a distribution already computed (so that two losses on
@@ -258,6 +294,11 @@ pub struct Mlp {
 }
 
 impl Mlp {
+    /// The layers' weights as plain numbers (for export).
+    pub fn weights(&self) -> Vec<Dense> {
+        self.layers.iter().map(dense).collect()
+    }
+
     /// `[B, input]` → `[B, output]`.
     pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
         let last = self.layers.len() - 1;

@@ -84,12 +84,7 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> SweepError + '_ {
 /// Writes `text` to `path` through a temporary file and a rename, so readers see the old
 /// file or the new one, never a part.
 pub fn write_atomically(path: &Path, text: &str) -> Result<(), SweepError> {
-    let partial = path.with_extension("partial");
-    std::fs::write(&partial, text).map_err(io(&partial))?;
-    std::fs::File::open(&partial)
-        .and_then(|f| f.sync_all())
-        .map_err(io(&partial))?;
-    std::fs::rename(&partial, path).map_err(io(path))
+    crate::files::write_atomically(path, text).map_err(io(path))
 }
 
 impl Sweep {

@@ -57,6 +57,9 @@ pub struct TrainArgs {
     /// Environment steps between checkpoints (a run resumes from its last one).
     #[arg(long)]
     pub checkpoint_every: Option<u64>,
+    /// Write no TensorBoard event files (the CSVs only).
+    #[arg(long)]
+    pub no_tensorboard: bool,
     /// Transitions per gradient update, drawn uniformly from the replay.
     #[arg(long)]
     pub batch_size: Option<usize>,
@@ -147,6 +150,7 @@ impl TrainArgs {
         c.eval_episodes = self.eval_episodes.unwrap_or(c.eval_episodes);
         c.checkpoint_every = self.checkpoint_every.unwrap_or(c.checkpoint_every);
         c.batch_size = self.batch_size.unwrap_or(c.batch_size);
+        c.tensorboard &= !self.no_tensorboard;
         c.device = self.device.unwrap_or(c.device);
         c.delay_device = self.delay_device.unwrap_or(c.delay_device);
         Ok(c)
@@ -173,6 +177,7 @@ impl TrainArgs {
             ("--eval-episodes", self.eval_episodes.is_some()),
             ("--checkpoint-every", self.checkpoint_every.is_some()),
             ("--batch-size", self.batch_size.is_some()),
+            ("--no-tensorboard", self.no_tensorboard),
             ("--alpha", self.alpha.is_some()),
             ("--fixed-alpha", self.fixed_alpha),
             ("--lifting-weight", self.lifting_weight.is_some()),

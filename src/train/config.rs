@@ -38,6 +38,8 @@ pub struct TrainConfig {
     pub checkpoint_every: u64,
     /// Gradient updates between rows of `train.csv`.
     pub log_every: u64,
+    /// Whether the logs are also written as TensorBoard event files (`RUN/tensorboard/`).
+    pub tensorboard: bool,
     /// Where the learners run.
     pub device: LearnDevice,
     /// Where the delay layer runs (training and evaluation copies).
@@ -64,6 +66,7 @@ impl Default for TrainConfig {
             eval_episodes: 10,
             checkpoint_every: 5_000,
             log_every: 1_000,
+            tensorboard: true,
             device: LearnDevice::Cpu,
             delay_device: DelayDevice::Cpu,
             algo: AlgoSettings::default(),

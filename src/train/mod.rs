@@ -10,6 +10,7 @@ mod curves;
 mod eval;
 mod logs;
 mod run;
+mod tensorboard;
 
 #[cfg(feature = "cli")]
 pub use args::{TrainArgs, TrainPlan};
@@ -21,7 +22,7 @@ pub use curves::{CurveSummary, EvalRow, curve_summary, read_evals, summarize_run
 pub use eval::{EvalResult, evaluate};
 #[cfg(feature = "cli")]
 pub use run::stop_on_signals;
-pub use run::{Start, TrainSummary, evaluate_saved, learner_pool, train};
+pub use run::{SavedRun, Start, TrainSummary, evaluate_saved, learner_pool, load_saved, train};
 
 use crate::delay::{DelayError, ReplayError};
 use crate::learn::LearnError;
@@ -48,6 +49,10 @@ pub enum TrainError {
     Io { path: String, message: String },
     #[error("{0} already exists; pick another --out, or continue it with --resume {0}")]
     OutputExists(String),
+    #[error(
+        "{0} is being trained by another dhrl process (it holds {0}/.lock): wait for it to end, or stop it, first"
+    )]
+    RunInUse(String),
     #[error("{0} holds no checkpoint to resume from (nothing was saved before the run stopped)")]
     NoCheckpoint(String),
     #[error(transparent)]

@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::checkpoint::{self, read_json, write_binary, write_json};
 use super::eval::{EvalPolicy, EvalResult, evaluate};
 use super::logs::{CsvLog, stat_means, truncate_after};
+use super::tensorboard::{self, EventLog};
 use super::{ConfigError, TrainConfig, TrainError, io_error};
 use crate::algos::{ActMode, Agent, AgentSpec, UpdateContext};
 use crate::delay::{DelayArgs, DelayConfig, DelayedBatch, ReplayError, ReplayStore};
@@ -98,6 +99,10 @@ struct Trainer {
     /// Opened when the loop starts, after a resume has cut the files back.
     evals: Option<CsvLog>,
     train_log: Option<CsvLog>,
+    /// TensorBoard's copy of both logs (unless the config turns it off).
+    events: Option<EventLog>,
+    /// The checkpoint's step when the run was resumed.
+    resumed_after: Option<u64>,
     stat_names: Vec<&'static str>,
 }
 
@@ -154,6 +159,8 @@ pub fn train(
     start: Start,
     progress: bool,
 ) -> Result<TrainSummary, TrainError> {
+    // Held until the run returns: a second `dhrl train` on the folder is refused.
+    let lock;
     let config = match start {
         Start::Fresh => {
             if run.exists() {
@@ -161,16 +168,18 @@ pub fn train(
             }
             config.validate()?;
             std::fs::create_dir_all(run).map_err(io_error(run))?;
+            lock = lock_run(run)?;
             let text = toml::to_string(config).map_err(|e| TrainError::Io {
                 path: "config.toml".into(),
                 message: e.to_string(),
             })?;
             let path = run.join("config.toml");
-            std::fs::write(&path, text).map_err(io_error(&path))?;
+            crate::files::write_atomically(&path, text).map_err(io_error(&path))?;
             config.clone()
         }
         Start::Resume => {
             let saved = TrainConfig::from_toml_file(&run.join("config.toml"))?;
+            lock = lock_run(run)?;
             // 0: no --steps given.
             if config.steps != 0 && config.steps < saved.steps {
                 return Err(TrainError::Config(ConfigError::Invalid {
@@ -189,7 +198,7 @@ pub fn train(
                     path: "config.toml".into(),
                     message: e.to_string(),
                 })?;
-                std::fs::write(&path, text).map_err(io_error(&path))?;
+                crate::files::write_atomically(&path, text).map_err(io_error(&path))?;
             }
             merged
         }
@@ -198,7 +207,29 @@ pub fn train(
     if start == Start::Resume {
         trainer.resume()?;
     }
-    trainer.run(progress)
+    let summary = trainer.run(progress);
+    drop(lock);
+    summary
+}
+
+/// The run folder's lock file, `RUN/.lock`, locked exclusively (the lock goes with the
+/// returned file): two processes training one folder would interleave its logs and
+/// checkpoints.
+fn lock_run(run: &Path) -> Result<std::fs::File, TrainError> {
+    let path = run.join(".lock");
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(io_error(&path))?;
+    match file.try_lock() {
+        Ok(()) => Ok(file),
+        Err(std::fs::TryLockError::WouldBlock) => {
+            Err(TrainError::RunInUse(run.display().to_string()))
+        }
+        Err(std::fs::TryLockError::Error(e)) => Err(io_error(&path)(e)),
+    }
 }
 
 impl Trainer {
@@ -251,6 +282,8 @@ impl Trainer {
             state,
             evals: None,
             train_log: None,
+            events: None,
+            resumed_after: None,
             stat_names,
         })
     }
@@ -278,6 +311,8 @@ impl Trainer {
         self.agent.load(&dir.join("agent"))?;
         truncate_after(&self.run.join("evals.csv"), self.state.env_steps)?;
         truncate_after(&self.run.join("train.csv"), self.state.env_steps)?;
+        tensorboard::truncate_after(&self.run, self.state.env_steps)?;
+        self.resumed_after = Some(self.state.env_steps);
         Ok(())
     }
 
@@ -411,7 +446,30 @@ impl Trainer {
             (s.env_steps, s.updates, s.wall_seconds);
         s.stat_sums.iter_mut().for_each(|v| *v = 0.0);
         s.stat_counts.iter_mut().for_each(|v| *v = 0);
-        self.train_log.as_mut().expect("opened above").append(&row)
+        let scalars: Vec<(String, f64)> = TRAIN_HEADER
+            .iter()
+            .chain(&self.stat_names)
+            .zip(&row)
+            .skip(1) // the step
+            .filter_map(|(name, cell)| Some((format!("train/{name}"), cell.parse().ok()?)))
+            .collect();
+        self.train_log.as_mut().expect("opened above").append(&row)?;
+        self.tensorboard(&scalars)
+    }
+
+    /// `scalars` into the run's TensorBoard events at the current step (opening its file
+    /// first), unless the config turns TensorBoard off.
+    fn tensorboard(&mut self, scalars: &[(String, f64)]) -> Result<(), TrainError> {
+        if !self.config.tensorboard {
+            return Ok(());
+        }
+        let events = match &mut self.events {
+            Some(events) => events,
+            None => self
+                .events
+                .insert(EventLog::create(&self.run, self.resumed_after)?),
+        };
+        events.scalars(self.state.env_steps, scalars)
     }
 
     fn evaluate_now(&mut self) -> Result<EvalResult, TrainError> {
@@ -442,6 +500,11 @@ impl Trainer {
             format!("{:.4}", result.return_std),
             format!("{:.2}", result.length_mean),
             result.episodes.to_string(),
+        ])?;
+        self.tensorboard(&[
+            ("eval/return_mean".into(), result.return_mean),
+            ("eval/return_std".into(), result.return_std),
+            ("eval/length_mean".into(), result.length_mean),
         ])?;
         self.state.last_eval = Some(result);
         Ok(result)
@@ -518,6 +581,40 @@ impl Trainer {
     }
 }
 
+/// A finished or stopped run's agent, as its latest checkpoint holds it.
+pub struct SavedRun {
+    pub config: TrainConfig,
+    /// The total delay Δ the run trained under.
+    pub trained_delay: usize,
+    /// Environment steps the run had taken at its checkpoint.
+    pub env_steps: u64,
+    pub agent: Box<dyn Agent>,
+}
+
+/// Loads the agent of `run`'s latest checkpoint, built for the total delay `delay` (by
+/// default the trained one, the only one a policy on `x_t` takes).
+pub fn load_saved(run: &Path, delay: Option<usize>) -> Result<SavedRun, TrainError> {
+    let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
+    let trained_delay = config.validate()?;
+    let dir = checkpoint::latest(run)
+        .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
+    let state: serde_json::Value = read_json(&dir.join("state.json"))?;
+    let env_steps = state["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
+        path: dir.join("state.json").display().to_string(),
+        message: "no env_steps in the checkpoint's state".into(),
+    })?;
+    let devices = Devices::new(config.device)?;
+    let spec = AgentSpec::for_task(config.task, delay.unwrap_or(trained_delay))?;
+    let mut agent = config.algo.build(&spec, &devices, config.seed);
+    agent.load(&dir.join("agent"))?;
+    Ok(SavedRun {
+        config,
+        trained_delay,
+        env_steps,
+        agent,
+    })
+}
+
 /// `dhrl eval`: the saved policy of `run` on `episodes` fresh copies, under the run's own
 /// delay with `delay`'s options laid over it. With `delay_free_policy`, D2HPG's delay-free
 /// policy is evaluated instead, in the undelayed task.
@@ -555,12 +652,14 @@ pub fn evaluate_saved(
             value: format!("{total} (trained with {trained_delay})"),
         }));
     }
-    let dir = checkpoint::latest(run)
-        .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
-    let devices = Devices::new(config.device)?;
-    let spec = AgentSpec::for_task(config.task, trained_delay)?;
-    let mut agent = config.algo.build(&spec, &devices, config.seed);
-    agent.load(&dir.join("agent"))?;
+    // A policy that does not read x_t whole is built for the evaluation's Δ, so that it splits
+    // the evaluation's rows of x_t (and delayed SAC rolls its model over all Δ actions).
+    let acting_delay = if info.acts_on_augmented_state {
+        trained_delay
+    } else {
+        total
+    };
+    let SavedRun { mut agent, .. } = load_saved(run, Some(acting_delay))?;
     let policy = if delay_free_policy {
         EvalPolicy::DelayFree
     } else {
