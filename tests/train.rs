@@ -997,7 +997,7 @@ fn a_run_in_training_cannot_be_resumed_by_a_second_process() {
         .args(["train", "--steps", "1000000", "--resume"])
         .arg(&run)
         .stdout(Stdio::null())
-        .stderr(Stdio::piped())
+        .stderr(Stdio::null())
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_secs(2));

@@ -288,13 +288,14 @@ def test_the_runtime_refuses_what_the_delay_model_rules_out(exports):
         late.observe(0, np.ones(obs))
 
 
-DEPLOY_RUN = pathlib.Path(__file__).resolve().parents[2] / "docs" / "runs" / "inverted-pendulum_bpql_delay3_30k-steps_deploy"
+REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
+DEPLOY_RUN = REPOSITORY / "docs" / "runs" / "inverted-pendulum_bpql_delay3_30k-steps_deploy"
+EXAMPLE = REPOSITORY / "examples" / "deploy_gymnasium.py"
 RETURN = re.compile(r"return (-?[0-9.]+) ± ([0-9.]+) over (\d+) episodes")
 
 
 def run_example(export: pathlib.Path, *args: str) -> str:
-    example = pathlib.Path(__file__).resolve().parents[2] / "examples" / "deploy_gymnasium.py"
-    done = subprocess.run([sys.executable, str(example), str(export), *args], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, str(EXAMPLE), str(export), *args], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     return done.stdout
 
@@ -326,6 +327,5 @@ def test_the_gymnasium_example_refuses_an_action_delay(dhrl_bin, tmp_path):
              "--steps", "150", "--warmup-steps", "100", "--batch-size", "16", "--eval-every", "150",
              "--eval-episodes", "1", "--out", str(run))
     run_dhrl(dhrl_bin, "export", str(run), "--out", str(tmp_path / "export"))
-    example = pathlib.Path(__file__).resolve().parents[2] / "examples" / "deploy_gymnasium.py"
-    done = subprocess.run([sys.executable, str(example), str(tmp_path / "export")], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, str(EXAMPLE), str(tmp_path / "export")], capture_output=True, text=True)
     assert done.returncode != 0 and "action delay of 1" in done.stderr, done.stderr

@@ -47,13 +47,8 @@ pub fn truncate_after(path: &Path, step: u64) -> Result<(), TrainError> {
             kept.push(line);
         }
     }
-    let tmp = path.with_extension("csv.tmp");
-    let mut out = File::create(&tmp).map_err(io_error(&tmp))?;
-    for line in kept {
-        writeln!(out, "{line}").map_err(io_error(&tmp))?;
-    }
-    out.sync_all().map_err(io_error(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(io_error(path))
+    let text: String = kept.iter().map(|line| format!("{line}\n")).collect();
+    crate::files::write_atomically(path, text).map_err(io_error(path))
 }
 
 /// `train.csv`'s statistic cells: each statistic's mean over the updates that reported it,

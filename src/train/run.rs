@@ -453,7 +453,10 @@ impl Trainer {
             .skip(1) // the step
             .filter_map(|(name, cell)| Some((format!("train/{name}"), cell.parse().ok()?)))
             .collect();
-        self.train_log.as_mut().expect("opened above").append(&row)?;
+        self.train_log
+            .as_mut()
+            .expect("opened above")
+            .append(&row)?;
         self.tensorboard(&scalars)
     }
 
