@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The runs behind docs/experiments.md's D2HPG comparison and lifting-settings tables, and their plots.
 #
-#   scripts/comparison.sh SET [--jobs N] [--seeds "0 1 2"] [--algos "A B"] [--runs DIR] [--dry-run]
+#   scripts/comparison.sh SET [--jobs N] [--seeds "0 1 2"] [--algos "A B"] [--conditions "C D"]
+#                         [--steps N] [--runs DIR] [--dry-run]
 #
 # SET: ip-delay5    InvertedPendulum, Δ = 5, 100k steps: d2hpg, bpql, vdpo, delayed-sac,
 #                   augmented-sac, naive-sac
@@ -17,17 +18,19 @@
 #                   without noise, with actuator noise σ = 0.1 and 0.2, and under random delays
 #                   in 1..=10 (conservative agent)
 #      principled-hc  the same on HalfCheetah, 50k steps
+#                   (conditions, for --conditions: none, noise0.1, noise0.2, random)
 #
 # Every run learns on one thread (RAYON_NUM_THREADS=1), N runs at a time (default: the number of
 # cores). A run folder that already exists is continued with `dhrl train --resume`, so the script
 # can be stopped and started again; a finished run is left as it is. --algos keeps only the
-# named algorithms of the set (ip-delay5, hc-delay10, principled-ip, principled-hc). The plot
+# named algorithms of the set (ip-delay5, hc-delay10, principled-ip, principled-hc), --conditions
+# the named conditions (principled-ip, principled-hc), --steps replaces the set's budget. The plot
 # goes to DIR/SET.svg (DIR defaults to runs/), with the final-return table printed beside it.
 # DHRL_BIN=PATH runs that program instead of building and running the checkout's.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
-usage() { sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { sed -n '2,29p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
 [[ $# -ge 1 ]] || usage
 set_name=$1
 shift
@@ -38,6 +41,8 @@ esac
 jobs=$(nproc)
 seeds="0 1 2"
 algos=""
+conditions=""
+steps=""
 runs=runs
 dry_run=false
 while [[ $# -gt 0 ]]; do
@@ -45,6 +50,8 @@ while [[ $# -gt 0 ]]; do
         --jobs) jobs=$2; shift 2 ;;
         --seeds) seeds=$2; shift 2 ;;
         --algos) algos=$2; shift 2 ;;
+        --conditions) conditions=$2; shift 2 ;;
+        --steps) steps=$2; shift 2 ;;
         --runs) runs=$2; shift 2 ;;
         --dry-run) dry_run=true; shift ;;
         *) echo "comparison.sh: unknown option $1" >&2; usage ;;
@@ -79,12 +86,13 @@ plan() {
                 done ;;
             principled-ip | principled-hc)
                 local task=inverted-pendulum prefix=ip extra="--warmup zeros --steps 25000 --eval-every 2500"
-                if [[ $set_name == principled-hc ]]; then task=half-cheetah prefix=hc extra="--steps 50000 --eval-every 5000"; fi
+                if [[ $set_name == principled-hc ]]; then task=half-cheetah prefix=hc extra="--steps 50000 --eval-every 2500"; fi
                 for condition in "none --delay 10" "noise0.1 --delay 10 --actuator-noise 0.1" \
                     "noise0.2 --delay 10 --actuator-noise 0.2" "random --random-delay --max-delay 10"; do
                     set -- $condition
                     local name=$1
                     shift
+                    [[ -z $conditions || " $conditions " == *" $name "* ]] || continue
                     for algo in ${algos:-d2hpg-principled d2hpg bpql}; do
                         echo "$prefix-$algo-$name-s$seed --task $task --algo $algo $* $extra --seed $seed"
                     done
@@ -93,7 +101,20 @@ plan() {
     done
 }
 
+if [[ -n $conditions ]]; then
+    [[ $set_name == principled-ip || $set_name == principled-hc ]] || { echo "comparison.sh: --conditions applies to principled-ip and principled-hc only, not '$set_name'" >&2; exit 2; }
+    for condition in $conditions; do
+        case $condition in
+            none | noise0.1 | noise0.2 | random) ;;
+            *) echo "comparison.sh: unknown condition '$condition' (accepted: none, noise0.1, noise0.2, random)" >&2; exit 2 ;;
+        esac
+    done
+fi
+[[ -z $steps || $steps =~ ^[1-9][0-9]*$ ]] || { echo "comparison.sh: --steps takes a positive whole number of environment steps, not '$steps'" >&2; exit 2; }
+
 lines=$(plan)
+# --steps replaces the budget every run of the set names.
+[[ -z $steps ]] || lines=$(printf '%s\n' "$lines" | sed -E "s/--steps [0-9]+/--steps $steps/")
 # DHRL_BIN names a dhrl program built before (so that rebuilding the checkout cannot change the
 # program under runs in flight); by default the checkout's, built first.
 dhrl=${DHRL_BIN:-target/release/dhrl}
