@@ -14,6 +14,10 @@
 #                   d2hpg-principled on InvertedPendulum, Δ = 10, actuator noise σ = 0.2, 25k
 #                   steps, with each of HPG's three departures from the paper's L_lax alone (the
 #                   paper's own are principled-ip's runs at σ = 0.2)
+#      principled-hc-settings
+#                   d2hpg-principled on HalfCheetah, Δ = 10, no noise, 30k steps: λ = 0.1 and
+#                   0.01 (λ = 1 is principled-hc's run, λ = 0 is BPQL), and each of HPG's three
+#                   departures from the paper's L_lax alone
 #      principled-ip  d2hpg-principled, d2hpg and bpql on InvertedPendulum, Δ = 10, 25k steps,
 #                   without noise, with actuator noise σ = 0.1 and 0.2, and under random delays
 #                   in 1..=10 (conservative agent)
@@ -30,13 +34,13 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
-usage() { sed -n '2,29p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
 [[ $# -ge 1 ]] || usage
 set_name=$1
 shift
 case $set_name in
-    ip-delay5 | hc-delay10 | lifting-ip | lifting-hc | principled-choices | principled-ip | principled-hc) ;;
-    *) echo "comparison.sh: unknown set '$set_name' (accepted: ip-delay5, hc-delay10, lifting-ip, lifting-hc, principled-choices, principled-ip, principled-hc)" >&2; exit 2 ;;
+    ip-delay5 | hc-delay10 | lifting-ip | lifting-hc | principled-choices | principled-hc-settings | principled-ip | principled-hc) ;;
+    *) echo "comparison.sh: unknown set '$set_name' (accepted: ip-delay5, hc-delay10, lifting-ip, lifting-hc, principled-choices, principled-hc-settings, principled-ip, principled-hc)" >&2; exit 2 ;;
 esac
 jobs=$(nproc)
 seeds="0 1 2"
@@ -83,6 +87,13 @@ plan() {
                     "stop stop_transition_gradient=true"; do
                     set -- $setting
                     echo "choice-$1-s$seed --task inverted-pendulum --algo d2hpg-principled --delay 10 --actuator-noise 0.2 --warmup zeros --steps 25000 --eval-every 2500 --seed $seed --set $2"
+                done ;;
+            principled-hc-settings)
+                for setting in "w0.1 lifting_weight=0.1" "w0.01 lifting_weight=0.01" \
+                    "mean metric_reduction=mean" "huber distance=huber" \
+                    "stop stop_transition_gradient=true"; do
+                    set -- $setting
+                    echo "hc-setting-$1-s$seed --task half-cheetah --algo d2hpg-principled --delay 10 --steps 30000 --eval-every 2500 --seed $seed --set $2"
                 done ;;
             principled-ip | principled-hc)
                 local task=inverted-pendulum prefix=ip extra="--warmup zeros --steps 25000 --eval-every 2500"

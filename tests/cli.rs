@@ -1,15 +1,11 @@
 //! The command line: bad input is a clear error (exit code 2 for usage, 1 otherwise), never a panic.
 // Needs the `dhrl` program (here or in tests/common) or `dhrl::report`: the default `cli` feature.
 #![cfg(feature = "cli")]
+mod common;
 use std::path::Path;
 use std::process::{Command, Output};
 
-fn dhrl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use common::dhrl;
 
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()

@@ -4,18 +4,12 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
 
 use dhrl::deploy::PolicyManifest;
 use dhrl::export::{CHECK_FILE, MANIFEST_FILE, ONNX_FILE, OPSET, SAFETENSORS_FILE};
 use onnx_protobuf::{Message, ModelProto};
 
-fn dhrl(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use common::dhrl;
 
 /// A run of a few dozen updates (what is exported need not have learned anything).
 fn tiny_run(dir: &Path, algo: &str, task: &str, delay: &[&str]) -> std::path::PathBuf {

@@ -12,12 +12,7 @@ use std::time::{Duration, Instant};
 use dhrl::delay::WarmupActions;
 use dhrl::sweep::{Experiment, ManifestRun, RunOutcome, RunState, Sweep};
 
-fn dhrl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use common::dhrl;
 
 fn ok(out: &Output) -> String {
     assert!(

@@ -9,12 +9,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-fn dhrl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use common::dhrl;
 
 fn ok(out: Output) -> String {
     assert!(

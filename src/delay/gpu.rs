@@ -3,6 +3,7 @@
 //! Each step uploads only what the simulator produced (actions, rewards, flags, new states, and
 //! the first states of episodes that restarted); results are read back only on request.
 use std::io::{Read, Write};
+use std::sync::{Mutex, OnceLock};
 
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
@@ -61,14 +62,121 @@ const WORKGROUP: u32 = 64;
 const IN_HELD: u32 = 4;
 const IN_RESTART: u32 = 8;
 
+/// The device every delay layer of this process runs on, opened by the first layer and kept
+/// for the life of the process, with the two pipelines compiled once. The training layer and
+/// each evaluation's layer share it: an evaluation then pays neither a Vulkan device nor a
+/// shader compilation, and no device is ever torn down while another runs (opening and
+/// destroying Mesa's software Vulkan devices beside a live one crashed a test run on CI, once,
+/// with a corrupted heap).
+struct SharedGpu {
+    adapter_name: String,
+    limits: wgpu::Limits,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    bind_group_layout: wgpu::BindGroupLayout,
+    reset_pipeline: wgpu::ComputePipeline,
+    step_pipeline: wgpu::ComputePipeline,
+}
+
+/// This process's [`SharedGpu`], opened on first use (the first GPU adapter, software ones
+/// included). A failure is returned, not kept: the next layer tries again.
+fn shared_gpu() -> Result<&'static SharedGpu, GpuError> {
+    static SHARED: OnceLock<SharedGpu> = OnceLock::new();
+    // Serialises the opening, so that two layers made at once open one device.
+    static OPENING: Mutex<()> = Mutex::new(());
+    if let Some(gpu) = SHARED.get() {
+        return Ok(gpu);
+    }
+    let _opening = OPENING
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some(gpu) = SHARED.get() {
+        return Ok(gpu);
+    }
+    let gpu = open_gpu()?;
+    Ok(SHARED.get_or_init(|| gpu))
+}
+
+fn open_gpu() -> Result<SharedGpu, GpuError> {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        ..Default::default()
+    }))
+    .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+    let info = adapter.get_info();
+    let adapter_name = format!("{} ({:?}, {:?})", info.name, info.device_type, info.backend);
+    let limits = adapter.limits();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("dhrl delay layer"),
+        required_limits: limits.clone(),
+        ..Default::default()
+    }))
+    .map_err(|e| GpuError::Device(e.to_string()))?;
+
+    let module = device.create_shader_module(wgpu::include_wgsl!("../../shaders/delay.wgsl"));
+    // One layout for both entry points: binding 0 the parameters, 1..=5 the state and
+    // outputs, 6..=7 the step inputs.
+    let buffer_entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    let entries: Vec<_> = (0..8)
+        .map(|binding| match binding {
+            0 => buffer_entry(0, wgpu::BufferBindingType::Uniform),
+            1..=5 => buffer_entry(
+                binding,
+                wgpu::BufferBindingType::Storage { read_only: false },
+            ),
+            _ => buffer_entry(
+                binding,
+                wgpu::BufferBindingType::Storage { read_only: true },
+            ),
+        })
+        .collect();
+    let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("delay layer"),
+        entries: &entries,
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("delay layer"),
+        bind_group_layouts: &[Some(&bind_group_layout)],
+        immediate_size: 0,
+    });
+    let pipeline = |entry: &str| {
+        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+    };
+    let (reset_pipeline, step_pipeline) = (pipeline("reset"), pipeline("step"));
+
+    Ok(SharedGpu {
+        adapter_name,
+        limits,
+        device,
+        queue,
+        bind_group_layout,
+        reset_pipeline,
+        step_pipeline,
+    })
+}
+
 /// The GPU implementation of the delay layer. Same outputs as [`super::CpuDelayLayer`].
 pub struct GpuDelayLayer {
     layout: DelayLayout,
-    adapter_name: String,
-    device: wgpu::Device,
-    queue: wgpu::Queue,
-    reset_pipeline: wgpu::ComputePipeline,
-    step_pipeline: wgpu::ComputePipeline,
+    gpu: &'static SharedGpu,
     /// Kept alive for the bind group; never read from the host.
     _params: wgpu::Buffer,
     ring: wgpu::Buffer,
@@ -91,7 +199,7 @@ pub struct GpuDelayLayer {
 }
 
 impl GpuDelayLayer {
-    /// Opens the first GPU adapter (software ones included) and allocates the buffers.
+    /// Allocates the buffers on this process's shared device (opened by the first layer).
     pub fn new(
         config: &DelayConfig,
         copies: usize,
@@ -102,22 +210,8 @@ impl GpuDelayLayer {
     ) -> Result<GpuDelayLayer, GpuError> {
         let layout = DelayLayout::for_config(config, copies, obs_dim, action_low.len())?;
         let delay = layout.delay;
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
-        let info = adapter.get_info();
-        let adapter_name = format!("{} ({:?}, {:?})", info.name, info.device_type, info.backend);
-        let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("dhrl delay layer"),
-            required_limits: limits.clone(),
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::Device(e.to_string()))?;
+        let gpu = shared_gpu()?;
+        let (device, limits) = (&gpu.device, &gpu.limits);
 
         let n = copies as u64;
         let f32s = size_of::<f32>() as u64;
@@ -143,53 +237,6 @@ impl GpuDelayLayer {
         if let Some(&(what, bytes)) = sizes.iter().find(|(_, bytes)| *bytes > limit) {
             return Err(GpuError::TooLarge { what, bytes, limit });
         }
-
-        let module = device.create_shader_module(wgpu::include_wgsl!("../../shaders/delay.wgsl"));
-        // One layout for both entry points: binding 0 the parameters, 1..=5 the state and
-        // outputs, 6..=7 the step inputs.
-        let buffer_entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let entries: Vec<_> = (0..8)
-            .map(|binding| match binding {
-                0 => buffer_entry(0, wgpu::BufferBindingType::Uniform),
-                1..=5 => buffer_entry(
-                    binding,
-                    wgpu::BufferBindingType::Storage { read_only: false },
-                ),
-                _ => buffer_entry(
-                    binding,
-                    wgpu::BufferBindingType::Storage { read_only: true },
-                ),
-            })
-            .collect();
-        let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("delay layer"),
-            entries: &entries,
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("delay layer"),
-            bind_group_layouts: &[Some(&bind_group_layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        let (reset_pipeline, step_pipeline) = (pipeline("reset"), pipeline("step"));
 
         let params = Params {
             copies: copies as u32,
@@ -231,7 +278,7 @@ impl GpuDelayLayer {
         let input_flags = storage("input flags", n * size_of::<u32>() as u64);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("delay layer"),
-            layout: &bind_group_layout,
+            layout: &gpu.bind_group_layout,
             entries: &[
                 &params_buffer,
                 &counters,
@@ -252,11 +299,7 @@ impl GpuDelayLayer {
         });
         Ok(GpuDelayLayer {
             layout,
-            adapter_name,
-            device,
-            queue,
-            reset_pipeline,
-            step_pipeline,
+            gpu,
             _params: params_buffer,
             ring,
             counters,
@@ -282,11 +325,12 @@ impl GpuDelayLayer {
 
     /// Name, type and backend of the adapter in use.
     pub fn adapter_name(&self) -> &str {
-        &self.adapter_name
+        &self.gpu.adapter_name
     }
 
     fn dispatch(&self, pipeline: &wgpu::ComputePipeline) {
         let mut encoder = self
+            .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("delay step"),
@@ -300,7 +344,7 @@ impl GpuDelayLayer {
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups((self.layout.copies as u32).div_ceil(WORKGROUP), 1, 1);
         }
-        self.queue.submit([encoder.finish()]);
+        self.gpu.queue.submit([encoder.finish()]);
     }
 
     /// Starts every copy's first episode from `observations` (`[N, obs_dim]`), on the device
@@ -312,9 +356,10 @@ impl GpuDelayLayer {
             observations.len(),
             l.copies * l.obs_dim,
         )?;
-        self.queue
+        self.gpu
+            .queue
             .write_buffer(&self.input, 0, bytemuck::cast_slice(observations));
-        self.dispatch(&self.reset_pipeline);
+        self.dispatch(&self.gpu.reset_pipeline);
         Ok(())
     }
 
@@ -356,20 +401,22 @@ impl GpuDelayLayer {
             self.input_scratch
                 .extend_from_slice(&step.observations[i * obs..(i + 1) * obs]);
         }
-        self.queue
+        self.gpu
+            .queue
             .write_buffer(&self.input, 0, bytemuck::cast_slice(&self.input_scratch));
-        self.queue.write_buffer(
+        self.gpu.queue.write_buffer(
             &self.input_flags,
             0,
             bytemuck::cast_slice(&self.flags_scratch),
         );
-        self.dispatch(&self.step_pipeline);
+        self.dispatch(&self.gpu.step_pipeline);
         Ok(())
     }
 
     /// Blocks until the device has finished every submitted step.
     pub fn wait(&self) -> Result<(), GpuError> {
-        self.device
+        self.gpu
+            .device
             .poll(wgpu::PollType::wait_indefinitely())
             .map(|_| ())
             .map_err(|e| GpuError::Readback(e.to_string()))
@@ -381,26 +428,28 @@ impl GpuDelayLayer {
         if bytes == 0 {
             return Ok(Vec::new());
         }
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size: bytes,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let mut encoder = self
+            .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("readback"),
             });
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
-        self.queue.submit([encoder.finish()]);
+        self.gpu.queue.submit([encoder.finish()]);
         let (sender, receiver) = std::sync::mpsc::channel();
         staging
             .slice(..)
             .map_async(wgpu::MapMode::Read, move |result| {
                 let _ = sender.send(result);
             });
-        self.device
+        self.gpu
+            .device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| GpuError::Readback(e.to_string()))?;
         receiver
@@ -551,7 +600,7 @@ impl DelayLayer for GpuDelayLayer {
                 bytemuck::cast_slice(&self.host_records.data),
             ),
         ] {
-            self.queue.write_buffer(buffer, 0, bytes);
+            self.gpu.queue.write_buffer(buffer, 0, bytes);
         }
         self.wait()
             .map_err(|e| std::io::Error::other(e.to_string()))?;

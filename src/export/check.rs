@@ -50,23 +50,18 @@ impl CheckRecord {
     pub fn to_safetensors(&self) -> Result<Vec<u8>, ExportError> {
         let (steps, policy, arrivals) =
             (self.steps(), self.policy_steps(), self.arrival_step.len());
-        let tensor = |name: &str, shape: Vec<usize>, values: &[f32]| Parameter {
-            name: name.into(),
-            shape,
-            values: values.to_vec(),
-        };
         let tensors = [
-            tensor("episode_start", vec![steps], &self.episode_start),
-            tensor("policy_step", vec![steps], &self.policy_step),
-            tensor(
+            Parameter::new("episode_start", vec![steps], &self.episode_start),
+            Parameter::new("policy_step", vec![steps], &self.policy_step),
+            Parameter::new(
                 "augmented_state",
                 vec![policy, self.width],
                 &self.augmented_state,
             ),
-            tensor("action", vec![steps, self.act_dim], &self.action),
-            tensor("arrival_decision", vec![arrivals], &self.arrival_decision),
-            tensor("arrival_step", vec![arrivals], &self.arrival_step),
-            tensor(
+            Parameter::new("action", vec![steps, self.act_dim], &self.action),
+            Parameter::new("arrival_decision", vec![arrivals], &self.arrival_decision),
+            Parameter::new("arrival_step", vec![arrivals], &self.arrival_step),
+            Parameter::new(
                 "arrival_observation",
                 vec![arrivals, self.obs_dim],
                 &self.arrival_observation,

@@ -15,6 +15,16 @@ pub struct Parameter {
     pub values: Vec<f32>,
 }
 
+impl Parameter {
+    pub fn new(name: impl Into<String>, shape: Vec<usize>, values: &[f32]) -> Parameter {
+        Parameter {
+            name: name.into(),
+            shape,
+            values: values.to_vec(),
+        }
+    }
+}
+
 /// Every tensor of `network`, in a fixed order.
 pub fn state_dict(network: &ActingNetwork) -> Vec<Parameter> {
     let mut out = Vec::new();
@@ -38,11 +48,11 @@ pub fn state_dict(network: &ActingNetwork) -> Vec<Parameter> {
             );
             linear(&mut out, "belief.token", &belief.token);
             let width = belief.width();
-            out.push(Parameter {
-                name: "belief.position.weight".into(),
-                shape: vec![belief.position.len() / width, width],
-                values: belief.position.clone(),
-            });
+            out.push(Parameter::new(
+                "belief.position.weight",
+                vec![belief.position.len() / width, width],
+                &belief.position,
+            ));
             layer_norm(&mut out, "belief.input_norm", &belief.input_norm);
             for (j, block) in belief.blocks.iter().enumerate() {
                 let b = format!("belief.blocks.{j}");
@@ -91,11 +101,11 @@ fn policy(out: &mut Vec<Parameter>, policy: &GaussianPolicyWeights) {
 }
 
 fn linear(out: &mut Vec<Parameter>, name: &str, layer: &Dense) {
-    out.push(Parameter {
-        name: format!("{name}.weight"),
-        shape: vec![layer.output, layer.input],
-        values: layer.weight_output_major(),
-    });
+    out.push(Parameter::new(
+        format!("{name}.weight"),
+        vec![layer.output, layer.input],
+        &layer.weight_output_major(),
+    ));
     vector(out, &format!("{name}.bias"), &layer.bias);
 }
 
@@ -105,11 +115,7 @@ fn layer_norm(out: &mut Vec<Parameter>, name: &str, norm: &Norm) {
 }
 
 fn vector(out: &mut Vec<Parameter>, name: &str, values: &[f32]) {
-    out.push(Parameter {
-        name: name.into(),
-        shape: vec![values.len()],
-        values: values.to_vec(),
-    });
+    out.push(Parameter::new(name, vec![values.len()], values));
 }
 
 /// `tensors` as a safetensors file's bytes, with `metadata` in its header.

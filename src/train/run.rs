@@ -598,23 +598,58 @@ pub struct SavedRun {
 /// default the trained one, the only one a policy on `x_t` takes).
 pub fn load_saved(run: &Path, delay: Option<usize>) -> Result<SavedRun, TrainError> {
     let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
+    load_checkpoint(run, config, delay)
+}
+
+/// [`load_saved`] with `run`'s configuration already read.
+fn load_checkpoint(
+    run: &Path,
+    config: TrainConfig,
+    delay: Option<usize>,
+) -> Result<SavedRun, TrainError> {
     let trained_delay = config.validate()?;
+    let devices = Devices::new(config.device)?;
+    let spec = AgentSpec::for_task(config.task, delay.unwrap_or(trained_delay))?;
+    // A run still training replaces its checkpoint while it is read (the new one renamed into
+    // place, the old one removed): a read that fails, or whose step count changed under it,
+    // is taken again (three tries), so that the agent and its step count come from one
+    // checkpoint.
+    let mut tries = 0;
+    loop {
+        tries += 1;
+        let read = || -> Result<(u64, Box<dyn Agent>), TrainError> {
+            let env_steps = checkpoint_steps(run)?;
+            let dir = checkpoint::latest(run)
+                .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
+            let mut agent = config.algo.build(&spec, &devices, config.seed);
+            agent.load(&dir.join("agent"))?;
+            Ok((env_steps, agent))
+        };
+        match read() {
+            Ok((env_steps, agent))
+                if tries == 3 || checkpoint_steps(run).ok() == Some(env_steps) =>
+            {
+                return Ok(SavedRun {
+                    config,
+                    trained_delay,
+                    env_steps,
+                    agent,
+                });
+            }
+            Err(e) if tries == 3 || matches!(e, TrainError::NoCheckpoint(_)) => return Err(e),
+            _ => std::thread::sleep(std::time::Duration::from_millis(200)),
+        }
+    }
+}
+
+/// The environment steps of `run`'s latest checkpoint.
+fn checkpoint_steps(run: &Path) -> Result<u64, TrainError> {
     let dir = checkpoint::latest(run)
         .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
     let state: serde_json::Value = read_json(&dir.join("state.json"))?;
-    let env_steps = state["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
+    state["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
         path: dir.join("state.json").display().to_string(),
         message: "no env_steps in the checkpoint's state".into(),
-    })?;
-    let devices = Devices::new(config.device)?;
-    let spec = AgentSpec::for_task(config.task, delay.unwrap_or(trained_delay))?;
-    let mut agent = config.algo.build(&spec, &devices, config.seed);
-    agent.load(&dir.join("agent"))?;
-    Ok(SavedRun {
-        config,
-        trained_delay,
-        env_steps,
-        agent,
     })
 }
 
@@ -662,7 +697,9 @@ pub fn evaluate_saved(
     } else {
         total
     };
-    let SavedRun { mut agent, .. } = load_saved(run, Some(acting_delay))?;
+    let SavedRun {
+        mut agent, config, ..
+    } = load_checkpoint(run, config, Some(acting_delay))?;
     let policy = if delay_free_policy {
         EvalPolicy::DelayFree
     } else {

@@ -44,6 +44,14 @@ pub fn update(agent: &mut dyn Agent, batch: &Transitions) -> Stats {
         .expect("a fixed batch is never empty")
 }
 
+/// Runs the `dhrl` program with `args`, waiting for it.
+pub fn dhrl(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_dhrl"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
 /// Runs `dhrl train ARGS --out RUN`, failing the test with its stderr if it fails.
 pub fn train(args: &[&str], run: &Path) {
     let out = Command::new(env!("CARGO_BIN_EXE_dhrl"))
