@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Per-setting summary of finished runs, seeds grouped: the final evaluation return and the mean
-over all evaluations (the area under the learning curve, each seed's in brackets), as mean ±
+over all evaluations (the area under the learning curve, each seed's in parentheses), as mean ±
 sample standard deviation over the seeds, and, against a reference setting, how many of the
-seed pairs each setting wins on each.
+seed pairs each setting wins on each (a tie is no win).
 
     scripts/seed_summary.py --group LABEL=DIR[,DIR...] [--group ...] [--reference LABEL]
 
@@ -25,12 +25,16 @@ def curve(run):
         sys.exit(f"seed_summary: cannot read {path}: {e.strerror}")
     if not rows:
         sys.exit(f"seed_summary: {path} has no evaluations")
+    missing = {"step", "return_mean"} - set(rows[0])
+    if missing:
+        sys.exit(f"seed_summary: {path} has no column {', '.join(sorted(missing))}")
     return [int(r["step"]) for r in rows], [float(r["return_mean"]) for r in rows]
 
 
 def spread(values):
-    sd = statistics.stdev(values) if len(values) > 1 else 0.0
-    return f"{statistics.mean(values):.0f} ± {sd:.0f}"
+    if len(values) == 1:
+        return f"{values[0]:.0f}"
+    return f"{statistics.mean(values):.0f} ± {statistics.stdev(values):.0f}"
 
 
 def main():
@@ -42,8 +46,10 @@ def main():
     steps_seen = None
     for spec in args.group:
         label, sep, dirs = spec.rpartition("=")
-        if not sep or not dirs:
+        if not sep or not label or any(not d for d in dirs.split(",")):
             sys.exit(f"seed_summary: --group takes LABEL=DIR[,DIR...], not '{spec}'")
+        if label in groups:
+            sys.exit(f"seed_summary: the label '{label}' names two groups")
         runs = []
         for run in dirs.split(","):
             steps, returns = curve(run)

@@ -3,7 +3,8 @@
 //! Each step uploads only what the simulator produced (actions, rewards, flags, new states, and
 //! the first states of episodes that restarted); results are read back only on request.
 use std::io::{Read, Write};
-use std::sync::{Mutex, OnceLock};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError, Weak};
 
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
@@ -62,12 +63,11 @@ const WORKGROUP: u32 = 64;
 const IN_HELD: u32 = 4;
 const IN_RESTART: u32 = 8;
 
-/// The device every delay layer of this process runs on, opened by the first layer and kept
-/// for the life of the process, with the two pipelines compiled once. The training layer and
-/// each evaluation's layer share it: an evaluation then pays neither a Vulkan device nor a
-/// shader compilation, and no device is ever torn down while another runs (opening and
-/// destroying Mesa's software Vulkan devices beside a live one crashed a test run on CI, once,
-/// with a corrupted heap).
+/// The device the delay layers of this process share, with the two pipelines compiled once:
+/// the training layer and each evaluation's layer run on one device, so an evaluation pays
+/// neither a Vulkan device nor a shader compilation, and no device is torn down while another
+/// runs (opening and dropping Mesa's software Vulkan devices beside a live one crashed a test
+/// run on CI, once, with a corrupted heap). It lives while a layer holds it.
 struct SharedGpu {
     adapter_name: String,
     limits: wgpu::Limits,
@@ -76,25 +76,24 @@ struct SharedGpu {
     bind_group_layout: wgpu::BindGroupLayout,
     reset_pipeline: wgpu::ComputePipeline,
     step_pipeline: wgpu::ComputePipeline,
+    /// Set by wgpu when the device is lost: the next layer opens a new one.
+    lost: Arc<AtomicBool>,
 }
 
-/// This process's [`SharedGpu`], opened on first use (the first GPU adapter, software ones
-/// included). A failure is returned, not kept: the next layer tries again.
-fn shared_gpu() -> Result<&'static SharedGpu, GpuError> {
-    static SHARED: OnceLock<SharedGpu> = OnceLock::new();
-    // Serialises the opening, so that two layers made at once open one device.
-    static OPENING: Mutex<()> = Mutex::new(());
-    if let Some(gpu) = SHARED.get() {
+/// The device a new layer runs on: the one the live layers share, or, where there is none or
+/// it was lost, a new one (the first GPU adapter, software ones included).
+fn shared_gpu() -> Result<Arc<SharedGpu>, GpuError> {
+    static SHARED: Mutex<Weak<SharedGpu>> = Mutex::new(Weak::new());
+    // Held while a device opens, so that layers made at once share one.
+    let mut shared = SHARED.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(gpu) = shared.upgrade()
+        && !gpu.lost.load(Ordering::Relaxed)
+    {
         return Ok(gpu);
     }
-    let _opening = OPENING
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner());
-    if let Some(gpu) = SHARED.get() {
-        return Ok(gpu);
-    }
-    let gpu = open_gpu()?;
-    Ok(SHARED.get_or_init(|| gpu))
+    let gpu = Arc::new(open_gpu()?);
+    *shared = Arc::downgrade(&gpu);
+    Ok(gpu)
 }
 
 fn open_gpu() -> Result<SharedGpu, GpuError> {
@@ -114,6 +113,9 @@ fn open_gpu() -> Result<SharedGpu, GpuError> {
         ..Default::default()
     }))
     .map_err(|e| GpuError::Device(e.to_string()))?;
+    let lost = Arc::new(AtomicBool::new(false));
+    let on_loss = Arc::clone(&lost);
+    device.set_device_lost_callback(move |_, _| on_loss.store(true, Ordering::Relaxed));
 
     let module = device.create_shader_module(wgpu::include_wgsl!("../../shaders/delay.wgsl"));
     // One layout for both entry points: binding 0 the parameters, 1..=5 the state and
@@ -170,13 +172,14 @@ fn open_gpu() -> Result<SharedGpu, GpuError> {
         bind_group_layout,
         reset_pipeline,
         step_pipeline,
+        lost,
     })
 }
 
 /// The GPU implementation of the delay layer. Same outputs as [`super::CpuDelayLayer`].
 pub struct GpuDelayLayer {
     layout: DelayLayout,
-    gpu: &'static SharedGpu,
+    gpu: Arc<SharedGpu>,
     /// Kept alive for the bind group; never read from the host.
     _params: wgpu::Buffer,
     ring: wgpu::Buffer,
@@ -199,7 +202,8 @@ pub struct GpuDelayLayer {
 }
 
 impl GpuDelayLayer {
-    /// Allocates the buffers on this process's shared device (opened by the first layer).
+    /// Allocates the buffers on the device that this process's live layers share (opened by the
+    /// first of them).
     pub fn new(
         config: &DelayConfig,
         copies: usize,

@@ -608,27 +608,30 @@ fn load_checkpoint(
     delay: Option<usize>,
 ) -> Result<SavedRun, TrainError> {
     let trained_delay = config.validate()?;
+    if !checkpoint::has_checkpoint(run) {
+        return Err(TrainError::NoCheckpoint(run.display().to_string()));
+    }
     let devices = Devices::new(config.device)?;
     let spec = AgentSpec::for_task(config.task, delay.unwrap_or(trained_delay))?;
     // A run still training replaces its checkpoint while it is read (the new one renamed into
-    // place, the old one removed): a read that fails, or whose step count changed under it,
-    // is taken again (three tries), so that the agent and its step count come from one
-    // checkpoint.
+    // place, the old one removed). A read is kept only if the checkpoint's step count is the
+    // same after it as before, so that the agent and its step count come from one checkpoint;
+    // a read that failed while the checkpoint changed is taken again. Three tries.
     let mut tries = 0;
     loop {
         tries += 1;
-        let read = || -> Result<(u64, Box<dyn Agent>), TrainError> {
-            let env_steps = checkpoint_steps(run)?;
+        let before = checkpoint_steps(run);
+        let steps_before = before.as_ref().ok().copied();
+        let read = before.and_then(|env_steps| {
             let dir = checkpoint::latest(run)
                 .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
             let mut agent = config.algo.build(&spec, &devices, config.seed);
             agent.load(&dir.join("agent"))?;
             Ok((env_steps, agent))
-        };
-        match read() {
-            Ok((env_steps, agent))
-                if tries == 3 || checkpoint_steps(run).ok() == Some(env_steps) =>
-            {
+        });
+        let steps_after = checkpoint_steps(run).ok();
+        match read {
+            Ok((env_steps, agent)) if steps_after == Some(env_steps) => {
                 return Ok(SavedRun {
                     config,
                     trained_delay,
@@ -636,7 +639,16 @@ fn load_checkpoint(
                     agent,
                 });
             }
-            Err(e) if tries == 3 || matches!(e, TrainError::NoCheckpoint(_)) => return Err(e),
+            // The checkpoint did not change: the error is its own.
+            Err(e) if tries == 3 || steps_after == steps_before => return Err(e),
+            _ if tries == 3 => {
+                return Err(TrainError::Io {
+                    path: run.display().to_string(),
+                    message: "its checkpoint was replaced during each of three reads (a run still \
+                              training): try again"
+                        .into(),
+                });
+            }
             _ => std::thread::sleep(std::time::Duration::from_millis(200)),
         }
     }

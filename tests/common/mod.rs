@@ -54,13 +54,7 @@ pub fn dhrl(args: &[&str]) -> std::process::Output {
 
 /// Runs `dhrl train ARGS --out RUN`, failing the test with its stderr if it fails.
 pub fn train(args: &[&str], run: &Path) {
-    let out = Command::new(env!("CARGO_BIN_EXE_dhrl"))
-        .arg("train")
-        .args(args)
-        .arg("--out")
-        .arg(run)
-        .output()
-        .unwrap();
+    let out = dhrl(&[&["train"], args, &["--out", run.to_str().unwrap()]].concat());
     assert!(
         out.status.success(),
         "{}",
