@@ -136,7 +136,7 @@ pub struct AlgoInfo {
     pub delayed_only: bool,
     /// Learners updated side by side (rayon threads an update can use to advantage).
     pub learner_threads: usize,
-    /// Fields shown in plot labels, with the symbol they are shown as (e.g. `λ`).
+    /// Fields shown in plot labels: `(symbol, field)`, e.g. `("λ", "lifting_weight")`.
     pub label_fields: &'static [(&'static str, &'static str)],
 }
 

@@ -76,7 +76,7 @@ pub fn summarize_runs(runs: &[PathBuf]) -> Result<Vec<CurveSummary>, TrainError>
         let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
         let delay = config.validate()?;
         let mut label = format!("{} {} Δ={delay}", config.task, config.algo);
-        for (field, symbol) in config.algo.info().label_fields {
+        for (symbol, field) in config.algo.info().label_fields {
             let value = match config.algo.fields().get(*field) {
                 Some(toml::Value::Float(v)) => v.to_string(),
                 Some(other) => other.to_string(),
@@ -171,4 +171,49 @@ pub fn plot_curves(curves: &[CurveSummary], title: &str, out: &Path) -> Result<(
         path: out.display().to_string(),
         message: e.to_string(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs that differ in a label field (λ here) are separate curves, labelled with it.
+    #[test]
+    fn label_fields_split_and_name_the_curves() {
+        let dir = tempfile::tempdir().unwrap();
+        let runs: Vec<PathBuf> = ["0.1", "1.0"]
+            .iter()
+            .map(|weight| {
+                let run = dir.path().join(format!("w{weight}"));
+                std::fs::create_dir(&run).unwrap();
+                std::fs::write(
+                    run.join("config.toml"),
+                    format!(
+                        "task = \"inverted-pendulum\"\n[delay]\nobservation_delay = 3\n\
+                         [algo]\nname = \"d2hpg\"\nlifting_weight = {weight}\n"
+                    ),
+                )
+                .unwrap();
+                std::fs::write(
+                    run.join("evals.csv"),
+                    "step,wall_seconds,return_mean,return_std,length_mean,episodes\n\
+                     500,1.0,10.0,1.0,10.0,3\n",
+                )
+                .unwrap();
+                run
+            })
+            .collect();
+        let labels: Vec<String> = summarize_runs(&runs)
+            .unwrap()
+            .into_iter()
+            .map(|curve| curve.label)
+            .collect();
+        assert_eq!(
+            labels,
+            [
+                "inverted-pendulum d2hpg Δ=3 λ=0.1 K=2",
+                "inverted-pendulum d2hpg Δ=3 λ=1 K=2"
+            ]
+        );
+    }
 }
