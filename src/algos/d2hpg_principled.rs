@@ -166,7 +166,13 @@ impl AlgoConfig for Config {
         undelayed_only: false,
         delayed_only: false,
         learner_threads: 2,
-        label_fields: &[("λ", "lifting_weight"), ("d", "latent_dim")],
+        label_fields: &[
+            ("λ", "lifting_weight"),
+            ("d", "latent_dim"),
+            ("reduction", "metric_reduction"),
+            ("distance", "distance"),
+            ("stop", "stop_transition_gradient"),
+        ],
     };
 
     fn validate(&self) -> Result<(), AlgoError> {

@@ -79,6 +79,7 @@ pub fn summarize_runs(runs: &[PathBuf]) -> Result<Vec<CurveSummary>, TrainError>
         for (symbol, field) in config.algo.info().label_fields {
             let value = match config.algo.fields().get(*field) {
                 Some(toml::Value::Float(v)) => v.to_string(),
+                Some(toml::Value::String(v)) => v.clone(),
                 Some(other) => other.to_string(),
                 None => continue,
             };
