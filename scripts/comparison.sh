@@ -16,8 +16,8 @@
 #                   paper's own are principled-ip's runs at σ = 0.2)
 #      principled-hc-settings
 #                   d2hpg-principled on HalfCheetah, Δ = 10, no noise, 30k steps: λ = 0.1 and
-#                   0.01 (λ = 1 is principled-hc's run, λ = 0 is BPQL), and each of HPG's three
-#                   departures from the paper's L_lax alone
+#                   0.01 (λ = 0 is BPQL), and each of HPG's three departures from the paper's
+#                   L_lax alone, each on top of the defaults (so the mean is the default's run)
 #      principled-ip  d2hpg-principled, d2hpg and bpql on InvertedPendulum, Δ = 10, 25k steps,
 #                   without noise, with actuator noise σ = 0.1 and 0.2, and under random delays
 #                   in 1..=10 (conservative agent)

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Per-setting summary of finished runs, seeds grouped: the final evaluation return and the mean
 over all evaluations (the area under the learning curve, each seed's in parentheses), as mean ±
-sample standard deviation over the seeds, and, against a reference setting, how many of the
-seed pairs each setting wins on each (a tie is no win).
+standard deviation over the seeds (population, as `dhrl plot`), and, against a reference
+setting, how many of the seed pairs each setting wins on each (a tie is no win).
 
     scripts/seed_summary.py --group LABEL=DIR[,DIR...] [--group ...] [--reference LABEL]
 
@@ -34,7 +34,7 @@ def curve(run):
 def spread(values):
     if len(values) == 1:
         return f"{values[0]:.0f}"
-    return f"{statistics.mean(values):.0f} ± {statistics.stdev(values):.0f}"
+    return f"{statistics.mean(values):.0f} ± {statistics.pstdev(values):.0f}"
 
 
 def main():

@@ -329,9 +329,9 @@ fn every_choice_changes_the_part_it_concerns() {
             "f_ξ",
         ),
         (
-            "metric_reduction = mean",
+            "metric_reduction = sum",
             D2hpgPrincipledConfig {
-                metric_reduction: MetricReduction::Mean,
+                metric_reduction: MetricReduction::Sum,
                 ..config(1.0)
             },
             "f_ξ",
