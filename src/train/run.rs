@@ -621,15 +621,13 @@ fn load_checkpoint(
     loop {
         tries += 1;
         let before = checkpoint_steps(run);
-        let steps_before = before.as_ref().ok().copied();
-        let read = before.and_then(|env_steps| {
-            let dir = checkpoint::latest(run)
-                .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
+        let steps_before = before.as_ref().ok().map(|&(_, steps)| steps);
+        let read = before.and_then(|(dir, env_steps)| {
             let mut agent = config.algo.build(&spec, &devices, config.seed);
             agent.load(&dir.join("agent"))?;
             Ok((env_steps, agent))
         });
-        let steps_after = checkpoint_steps(run).ok();
+        let steps_after = checkpoint_steps(run).ok().map(|(_, steps)| steps);
         match read {
             Ok((env_steps, agent)) if steps_after == Some(env_steps) => {
                 return Ok(SavedRun {
@@ -654,15 +652,16 @@ fn load_checkpoint(
     }
 }
 
-/// The environment steps of `run`'s latest checkpoint.
-fn checkpoint_steps(run: &Path) -> Result<u64, TrainError> {
+/// `run`'s latest checkpoint folder and its environment steps.
+fn checkpoint_steps(run: &Path) -> Result<(PathBuf, u64), TrainError> {
     let dir = checkpoint::latest(run)
         .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
     let state: serde_json::Value = read_json(&dir.join("state.json"))?;
-    state["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
+    let env_steps = state["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
         path: dir.join("state.json").display().to_string(),
         message: "no env_steps in the checkpoint's state".into(),
-    })
+    })?;
+    Ok((dir, env_steps))
 }
 
 /// `dhrl eval`: the saved policy of `run` on `episodes` fresh copies, under the run's own
