@@ -15,7 +15,7 @@ use dhrl::algos::{
     Homomorphism, LaxMetric, MetricReduction, RegularCritic, SacConfig, TransitionLoss,
     abstract_model_loss, gaussian_w2, lax_loss, random_batch,
 };
-use dhrl::learn::{Devices, LearnDevice, Mlp, lifting_loss, matrix, to_vec};
+use dhrl::learn::{Devices, LearnDevice, Mlp, TransitionTensors, lifting_loss, matrix, to_vec};
 
 /// burn's generator is process-wide: networks built by concurrent tests would interleave draws.
 static BUILD: Mutex<()> = Mutex::new(());
@@ -124,44 +124,59 @@ fn lax_loss_matches_hand_values_on_two_pairs() {
 fn stopping_the_transition_gradient_leaves_the_abstract_transition_out_of_l_lax() {
     let d = devices();
     let (states, rewards, (mean, std)) = two_pairs(&d.plain);
-    let gradient_of_mean = |stop: bool| {
-        let tracked = Tensor::from_inner(mean.clone()).require_grad();
+    // The gradients reaching the transition's μ and σ.
+    let gradients = |stop: bool| {
+        let tracked_mean = Tensor::from_inner(mean.clone()).require_grad();
+        let tracked_std = Tensor::from_inner(std.clone()).require_grad();
         let loss = lax_loss(
             Tensor::from_inner(states.clone()),
             Tensor::from_inner(rewards.clone()),
-            (tracked.clone(), Tensor::from_inner(std.clone())),
+            (tracked_mean.clone(), tracked_std.clone()),
             1,
             0.9,
             &metric(MetricReduction::Sum, Distance::L1, stop),
         );
         let grads = loss.backward();
-        tracked.grad(&grads).map(to_vec)
+        (
+            tracked_mean.grad(&grads).map(to_vec),
+            tracked_std.grad(&grads).map(to_vec),
+        )
     };
-    let free = gradient_of_mean(false).expect("L_lax reaches μ when the transition is free");
+    let (free, free_std) = gradients(false);
+    let free = free.expect("L_lax reaches μ when the transition is free");
+    // ∂W₂/∂σ_01 = (σ_01 − σ_11)/W₂ = −4/5 in each term: ∂L/∂σ_01 = −2(d − c)·0.9·(−0.8) = −2.88.
+    let free_std = free_std.expect("L_lax reaches σ when the transition is free");
+    close(free_std[1], -2.88, "∂L_lax/∂σ_01");
     // By hand: L = mean of two equal terms (d − c)², c = 0.5 + 0.9·W₂, W₂ = |Δμ| along the
     // first dimension (Δσ fixed): ∂L/∂μ_00 = −2(d − c)·0.9·∂W₂/∂μ_00 per term, both terms.
     // d − c = −2, ∂W₂/∂μ_00 = (μ_00 − μ_10)/W₂ = −3/5 in each term: ∂L/∂μ_00 = 2·(−2·−0.9·−0.6)
     // ·½ = −2.16 (and +2.16 for μ_10).
     close(free[0], -2.16, "∂L_lax/∂μ_00");
     close(free[2], 2.16, "∂L_lax/∂μ_10");
-    match gradient_of_mean(true) {
-        None => {}
-        Some(grad) => assert!(
-            grad.iter().all(|g| *g == 0.0),
-            "a held transition still gets a gradient: {grad:?}"
-        ),
+    let (held_mean, held_std) = gradients(true);
+    for (name, held) in [("μ", held_mean), ("σ", held_std)] {
+        if let Some(grad) = held {
+            assert!(
+                grad.iter().all(|g| *g == 0.0),
+                "a held transition's {name} still gets a gradient: {grad:?}"
+            );
+        }
     }
 }
 
 #[test]
 fn abstract_model_loss_matches_hand_values() {
     let d = devices().plain;
-    // One sample, two latent dimensions: μ = (0, 1), σ = (1, 2), f(x') = (1, 1), ε = (0.5, −1),
-    // r̄⁺ = 0.3, r̃ = 1.
-    let transition = (m(&[0.0, 1.0], 1, &d), m(&[1.0, 2.0], 1, &d));
-    let next = m(&[1.0, 1.0], 1, &d);
-    let eps = m(&[0.5, -1.0], 1, &d);
-    let rewards = (m(&[0.3], 1, &d), m(&[1.0], 1, &d));
+    // Two samples, two latent dimensions. The first: μ = (0, 1), σ = (1, 2), f(x') = (1, 1),
+    // ε = (0.5, −1), r̄⁺ = 0.3, r̃ = 1. The second fits exactly (μ = f(x') = 0, σ = 1, ε = 0,
+    // r̄⁺ = r̃) and costs 0 in both forms, so the batch's mean is half the first's term.
+    let transition = (
+        m(&[0.0, 1.0, 0.0, 0.0], 2, &d),
+        m(&[1.0, 2.0, 1.0, 1.0], 2, &d),
+    );
+    let next = m(&[1.0, 1.0, 0.0, 0.0], 2, &d);
+    let eps = m(&[0.5, -1.0, 0.0, 0.0], 2, &d);
+    let rewards = (m(&[0.3, 1.0], 2, &d), m(&[1.0, 1.0], 2, &d));
     let loss = |form| {
         to_vec(abstract_model_loss(
             transition.clone(),
@@ -171,16 +186,16 @@ fn abstract_model_loss_matches_hand_values() {
             form,
         ))[0]
     };
-    // NLL: ½(−1/1)² + ln 1 + ½(0/2)² + ln 2, plus (0.3 − 1)² = 0.49.
+    // NLL: ½(−1/1)² + ln 1 + ½(0/2)² + ln 2, plus (0.3 − 1)² = 0.49; halved by the mean.
     close(
         loss(TransitionLoss::GaussianNll),
-        0.5 + 2f64.ln() + 0.49,
+        (0.5 + 2f64.ln() + 0.49) / 2.0,
         "L_h, Gaussian NLL",
     );
-    // Eq. 3: the sample (0.5, −1) against (1, 1): 0.25 + 4, plus 0.49.
+    // Eq. 3: the sample (0.5, −1) against (1, 1): 0.25 + 4, plus 0.49; halved by the mean.
     close(
         loss(TransitionLoss::SampleSquared),
-        4.74,
+        4.74 / 2.0,
         "L_h, sampled squared error",
     );
 }
@@ -260,6 +275,60 @@ fn parts(agent: &D2hpgPrincipled) -> Vec<(&'static str, Vec<f32>)> {
             parameters(&agent.abstract_learner.target),
         ),
     ]
+}
+
+/// Line 23's wiring: `update` logs L_lax and L_h of the homomorphism before its step, on the
+/// batch's `x`, `a`, `r̃` and `x'` with the configured γ; recomputed here from a copy of the
+/// same networks and of the model stream (the pairing shift, then ε) through the loss
+/// functions checked by hand above. A wrong input (`x` for `x'`, R̄'s reward for `r̃` in the
+/// metric, `x` for the action map's action) or a wrong γ changes a logged value.
+#[test]
+fn update_logs_l_lax_and_l_h_of_the_batch_it_was_given() {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let (spec, d) = (spec(3), devices());
+    let b = random_batch(&spec, 32, 5);
+    for transition_loss in [TransitionLoss::GaussianNll, TransitionLoss::SampleSquared] {
+        let config = D2hpgPrincipledConfig {
+            transition_loss,
+            ..config(1.0)
+        };
+        let mut agent = D2hpgPrincipled::new(&config, &spec, &d, 8);
+        let h = agent.homomorphism.valid();
+        let mut noise = agent.model_noise.clone();
+        let t = TransitionTensors::new(&b, &d.plain);
+        let shift = 1 + noise.below(b.len() - 1);
+        let eps = noise.normal(b.len(), config.latent_dim, &d.plain);
+        let state = h.abstract_state(t.augmented.clone());
+        let action = h.abstract_action(t.augmented.clone(), t.action.clone());
+        let transition = h.transition(state.clone(), action.clone());
+        let expected_lax = to_vec(lax_loss(
+            state.clone(),
+            t.reward.clone(),
+            transition.clone(),
+            shift,
+            config.sac.gamma,
+            &LaxMetric::of(&config),
+        ))[0];
+        let expected_model = to_vec(abstract_model_loss(
+            transition,
+            h.abstract_state(t.next_augmented.clone()),
+            eps,
+            (h.reward(state, action), t.reward.clone()),
+            transition_loss,
+        ))[0];
+        let stats = update(&mut agent, &b);
+        let logged = |name: &str| stats.iter().find(|(n, _)| *n == name).unwrap().1;
+        close(
+            expected_lax,
+            logged("lax_loss"),
+            &format!("L_lax ({transition_loss:?})"),
+        );
+        close(
+            expected_model,
+            logged("model_loss"),
+            &format!("L_h ({transition_loss:?})"),
+        );
+    }
 }
 
 /// One update: line 23 moves all four networks of the homomorphism; L_lift (λ = 10 against
@@ -467,9 +536,25 @@ fn without_lifting_the_regular_learner_is_bpql() {
 /// about 5–10, the broken variants of `tests/d2hpg.rs` ≤ 17).
 #[test]
 fn principled_d2hpg_learns_a_small_delayed_task() {
-    let (best, text) = common::learn_delayed_pendulum("d2hpg-principled", 2, &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let (best, text) = common::train_delayed_pendulum(&run, "d2hpg-principled", 2, &[]);
     assert!(
         best > 40.0,
         "d2hpg-principled: best evaluation return {best}, below the bar of 40\n{text}"
+    );
+    // The return alone would pass with the abstract side broken (the regular learner is BPQL
+    // plus the lifting term): the homomorphism must fit its metric too, L_lax of the last
+    // quarter of the logged rows below that of the first quarter.
+    let lax: Vec<f64> = common::column(&run.join("train.csv"), "lax_loss")
+        .iter()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let quarter = (lax.len() / 4).max(1);
+    let mean = |rows: &[f64]| rows.iter().sum::<f64>() / rows.len() as f64;
+    let (first, last) = (mean(&lax[..quarter]), mean(&lax[lax.len() - quarter..]));
+    assert!(
+        last < first,
+        "L_lax did not fall: first quarter {first}, last quarter {last} ({lax:?})"
     );
 }

@@ -15,12 +15,15 @@
 //! - 22: a mini-batch, each sample paired with the one a random shift away (a permutation
 //!   with no fixed point, so no sample is paired with itself);
 //! - 23: `h`, `P̄_τ` and `R̄_ν` take one Adam step on `lax_weight·L_lax + L_h`, the encoded
-//!   next state `f(x')` in L_h held fixed (as both reference codes do); each loss reaches every
+//!   next state `f(x')` in L_h held fixed (a regression target, not a second path into `f_ξ`);
+//!   each loss reaches every
 //!   network it passes through (L_h reaches `f_ξ` and `g_ω` through `P̄_τ`'s and `R̄_ν`'s
 //!   inputs), as the line's joint training reads;
 //! - 24: both critics step: the regular one on the replay's `(s or x, a, r̃, s' or x')`, the
 //!   abstract one on `(f(x), g(x, a), R̄(f(x), g(x, a)), f(x'))` from the `h` just updated,
-//!   held fixed;
+//!   held fixed, with SAC's target: the next abstract action drawn from `π̄(·|f(x'))` with its
+//!   entropy term (the paper writes `Q_φ2'(x̄⁺, ā⁺)` and allows the targets to be modified;
+//!   HPG's abstract critic also takes it from its abstract policy);
 //! - 25 and 27: the regular policy takes BPQL's actor step (the Algorithm's optional line,
 //!   `regular_policy_step`) with `λ·L_lift` in the same loss; the lifting gradient reaches θ
 //!   through `g_ω`, which it does not move, and the abstract side of `L_lift(θ, θ')` is held
@@ -34,10 +37,13 @@
 //! Where the paper is silent or the reference code of the stochastic homomorphic policy
 //! gradient (HPG, Rezaei-Shoshtari et al.) differs from it, the choice is a field below. The
 //! defaults follow the paper's equations, except `transition_loss` (see its field),
-//! `regular_critic` (BPQL's critic on `s`, as `d2hpg`, where `L_regular-critic` reads `Q(x, a)`)
-//! and `metric_reduction`, which is HPG's per-dimension mean, chosen by measurement: on
-//! HalfCheetah at Δ = 10 (30k steps, no noise) it ends above Eq. 2's sum in 9 of 9 seed pairs
-//! (final return 1351 ± 498 against 313 ± 308), level with D2HPG and BPQL, while Huber's
+//! `regular_critic` (BPQL's critic on `s`, as `d2hpg`, where `L_regular-critic` reads `Q(x, a)`),
+//! the gradient paths the list above gives (L_lift moves θ only, though written `L_lift(θ, θ')`;
+//! L_h reaches ξ and ω, though written `L_h(ν, τ)`; L_lax reaches τ unless
+//! `stop_transition_gradient`, though written `L_lax(ξ, ω)`), and `metric_reduction`, which is
+//! HPG's per-dimension mean, chosen by measurement: on HalfCheetah at Δ = 10 (30k steps, no
+//! noise) it ends above Eq. 2's sum in 9 of 9 seed pairs (final return 1351 ± 406 against
+//! 313 ± 251, population std over 3 seeds), level with D2HPG and BPQL, while Huber's
 //! distance, the held transition and λ ∈ {0.1, 0.01} separated nothing from the paper's forms
 //! (docs/experiments.md, "Principled D2HPG: the settings").
 use std::path::Path;
@@ -301,7 +307,8 @@ pub struct LaxMetric {
 }
 
 impl LaxMetric {
-    fn of(config: &Config) -> LaxMetric {
+    /// The metric's choices of `config`.
+    pub fn of(config: &Config) -> LaxMetric {
         LaxMetric {
             reduction: config.metric_reduction,
             distance: config.distance,
@@ -420,7 +427,7 @@ pub struct D2hpgPrincipled {
     /// `π̄_θ'` on `x̄`, `Q_φ2` on `(x̄, ā)`, actions in (−1, 1).
     pub abstract_learner: SacLearner,
     /// The pairing shifts of L_lax and the samples of `SampleSquared`.
-    model_noise: Noise,
+    pub model_noise: Noise,
     lifting_noise: Noise,
 }
 

@@ -91,7 +91,17 @@ pub fn best_return(run: &Path) -> (f64, String) {
 /// their bars were measured), with `extra` flags; returns the best evaluation.
 pub fn learn_delayed_pendulum(algo: &str, delay: usize, extra: &[&str]) -> (f64, String) {
     let dir = tempfile::tempdir().unwrap();
-    let run = dir.path().join("run");
+    train_delayed_pendulum(&dir.path().join("run"), algo, delay, extra)
+}
+
+/// [`learn_delayed_pendulum`] into the run folder `run`, which the caller keeps (to read its
+/// `train.csv`).
+pub fn train_delayed_pendulum(
+    run: &Path,
+    algo: &str,
+    delay: usize,
+    extra: &[&str],
+) -> (f64, String) {
     let delay = delay.to_string();
     let mut args = vec![
         "--task",
@@ -116,8 +126,8 @@ pub fn learn_delayed_pendulum(algo: &str, delay: usize, extra: &[&str]) -> (f64,
         "random",
     ];
     args.extend_from_slice(extra);
-    train(&args, &run);
-    best_return(&run)
+    train(&args, run);
+    best_return(run)
 }
 
 /// The columns of a CSV log that do not depend on timing (all but the wall-clock ones).
