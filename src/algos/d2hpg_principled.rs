@@ -16,9 +16,8 @@
 //!   with no fixed point, so no sample is paired with itself);
 //! - 23: `h`, `P̄_τ` and `R̄_ν` take one Adam step on `lax_weight·L_lax + L_h`, the encoded
 //!   next state `f(x')` in L_h held fixed (a regression target, not a second path into `f_ξ`);
-//!   each loss reaches every
-//!   network it passes through (L_h reaches `f_ξ` and `g_ω` through `P̄_τ`'s and `R̄_ν`'s
-//!   inputs), as the line's joint training reads;
+//!   each loss reaches every network it passes through (L_h reaches `f_ξ` and `g_ω` through
+//!   `P̄_τ`'s and `R̄_ν`'s inputs), as the line's joint training reads;
 //! - 24: both critics step: the regular one on the replay's `(s or x, a, r̃, s' or x')`, the
 //!   abstract one on `(f(x), g(x, a), R̄(f(x), g(x, a)), f(x'))` from the `h` just updated,
 //!   held fixed, with SAC's target: the next abstract action drawn from `π̄(·|f(x'))` with its
