@@ -86,7 +86,7 @@ fn saved_learner(
     spec: &AgentSpec,
 ) -> SacLearner {
     let mut learner = SacLearner::new(actor, critic, spec, &SacConfig::default(), &devices(), 0);
-    learner.load(dir, prefix).unwrap();
+    learner.load(&[dir], prefix).unwrap();
     learner
 }
 
@@ -115,9 +115,9 @@ fn bpql_critic_reads_the_true_state_and_its_actor_reads_x() {
     // By hand: J_Q = mean (Q1(s,a) − y)² + mean (Q2(s,a) − y)²,
     // y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|x')), a' = π(x', ε) with the learner's first ε.
     let plain = d.plain.clone();
-    let m = |v: &[f32], cols: usize| matrix(v.to_vec(), n, cols, &plain);
-    let alpha = copy.temperature.alpha();
-    let eps = copy.noise.normal(n, act, &plain);
+    let m = |v: &[f32], cols: usize| matrix(v.to_vec(), n, cols, &plain).unsqueeze_dim::<3>(0);
+    let alpha = copy.temperature.alphas()[0];
+    let eps = copy.noise[0].normal(n, act, &plain).unsqueeze_dim(0);
     let next = copy
         .actor
         .valid()

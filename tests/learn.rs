@@ -8,8 +8,8 @@ use burn::optim::GradientsParams;
 use burn::prelude::*;
 use common::parameters;
 use dhrl::learn::{
-    Devices, LearnDevice, MlpConfig, QNetwork, Temperature, TwinQ, actor_loss, column, critic_loss,
-    critic_target, matrix, polyak, squashed_gaussian_log_prob, temperature_loss, to_vec,
+    Devices, LearnDevice, MlpConfig, QNetwork, Temperature, TwinQ, actor_loss, critic_loss,
+    critic_target, matrix, polyak, squashed_gaussian_log_prob, stack, temperature_loss, to_vec,
 };
 
 fn devices() -> Devices {
@@ -78,52 +78,80 @@ fn squashed_gaussian_log_prob_is_stable_where_tanh_saturates() {
     close(got[0], want, 1e-5);
 }
 
+/// `[runs, len / runs, 1]`: one column per run of a stack.
+fn columns(values: Vec<f32>, runs: usize, d: &Devices) -> Tensor<3> {
+    let rows = values.len() / runs;
+    Tensor::from_data(TensorData::new(values, [runs, rows, 1]), &d.plain)
+}
+
+/// `α` per run, `[runs, 1, 1]`.
+fn alphas(values: Vec<f32>, d: &Devices) -> Tensor<3> {
+    let runs = values.len();
+    Tensor::from_data(TensorData::new(values, [runs, 1, 1]), &d.plain)
+}
+
 #[test]
-fn critic_target_bootstraps_unless_terminated() {
+fn critic_target_bootstraps_unless_terminated_with_each_runs_alpha() {
     let d = devices();
+    // Two runs of two rows: run 0 with α = 0.2, run 1 with α = 0.5.
     let y = critic_target(
-        column(vec![1.0, 2.0], &d.plain),
-        column(vec![0.0, 1.0], &d.plain),
-        column(vec![10.0, 10.0], &d.plain),
-        column(vec![-1.0, -1.0], &d.plain),
-        0.2,
+        columns(vec![1.0, 2.0, 1.0, 2.0], 2, &d),
+        columns(vec![0.0, 1.0, 0.0, 1.0], 2, &d),
+        columns(vec![10.0, 10.0, 10.0, 10.0], 2, &d),
+        columns(vec![-1.0, -1.0, -1.0, -1.0], 2, &d),
+        alphas(vec![0.2, 0.5], &d),
         0.99,
     );
     let y = to_vec(y);
     close(y[0], 1.0 + 0.99 * (10.0 + 0.2), 1e-6); // 11.098
     close(y[1], 2.0, 1e-6); // terminal: reward only
+    close(y[2], 1.0 + 0.99 * (10.0 + 0.5), 1e-6);
+    close(y[3], 2.0, 1e-6);
 }
 
 #[test]
-fn critic_and_actor_losses_match_hand_values() {
+fn critic_and_actor_losses_match_hand_values_per_run() {
     let d = devices();
-    let q1 = column(vec![1.0, 2.0], &d.plain);
-    let q2 = column(vec![0.0, 0.0], &d.plain);
-    let y = column(vec![1.0, 1.0], &d.plain);
-    // mean((0, 1)²) + mean((−1, −1)²) = 0.5 + 1
-    close(to_vec(critic_loss(q1, q2, y))[0], 1.5, 1e-6);
-    // mean(0.5·(−1) − 2, 0.5·1 − 4) = mean(−2.5, −3.5)
+    // Run 0: mean((0, 1)²) + mean((−1, −1)²) = 0.5 + 1; run 1: mean((1, 1)²) + mean((0, 2)²) = 1 + 2.
+    let q1 = columns(vec![1.0, 2.0, 2.0, 2.0], 2, &d);
+    let q2 = columns(vec![0.0, 0.0, 1.0, 3.0], 2, &d);
+    let y = columns(vec![1.0, 1.0, 1.0, 1.0], 2, &d);
+    let critic = to_vec(critic_loss(q1, q2, y));
+    assert_eq!(critic.len(), 2);
+    close(critic[0], 1.5, 1e-6);
+    close(critic[1], 3.0, 1e-6);
+    // Run 0, α = 0.5: mean(0.5·(−1) − 2, 0.5·1 − 4) = −3; run 1, α = 1: mean(−1 − 0, 1 − 2) = −1.
     let loss = actor_loss(
-        column(vec![-1.0, 1.0], &d.plain),
-        column(vec![2.0, 4.0], &d.plain),
-        0.5,
+        columns(vec![-1.0, 1.0, -1.0, 1.0], 2, &d),
+        columns(vec![2.0, 4.0, 0.0, 2.0], 2, &d),
+        alphas(vec![0.5, 1.0], &d),
     );
-    close(to_vec(loss)[0], -3.0, 1e-6);
+    let actor = to_vec(loss);
+    close(actor[0], -3.0, 1e-6);
+    close(actor[1], -1.0, 1e-6);
 }
 
 #[test]
-fn temperature_loss_and_its_gradient_match_hand_values() {
+fn temperature_loss_and_its_gradient_match_hand_values_per_run() {
     let d = devices();
-    let temperature = Temperature::new(0.2, &d.train);
-    // J(α) = −α(mean log π + H̄) = −0.2·(−2 − 1) = 0.6; dJ/d log α = −α(mean log π + H̄) = 0.6.
-    let loss = temperature_loss(temperature.log_alpha.val(), -2.0, -1.0);
-    close(to_vec(loss.clone().inner())[0], 0.6, 1e-6);
-    let mut grads = loss.backward();
+    let temperature = stack(vec![
+        Temperature::new(0.2, &d.train),
+        Temperature::new(0.5, &d.train),
+    ]);
+    // J(α) = −α(mean log π + H̄): run 0 −0.2·(−2 − 1) = 0.6, run 1 −0.5·(0.5 − 1) = 0.25; each
+    // run's gradient dJ/d log α is its own J (the losses are summed over the stack).
+    let loss = temperature_loss(temperature.log_alpha.val(), &[-2.0, 0.5], -1.0);
+    let values = to_vec(loss.clone().inner());
+    close(values[0], 0.6, 1e-6);
+    close(values[1], 0.25, 1e-6);
+    let mut grads = loss.sum().backward();
     let grads = GradientsParams::from_module(&mut grads, &temperature);
-    let grad: Tensor<1> = grads
+    let grad: Tensor<2> = grads
         .get(temperature.log_alpha.id)
         .expect("log α has a gradient");
-    close(to_vec(grad)[0], 0.6, 1e-5);
+    let grad = to_vec(grad);
+    close(grad[0], 0.6, 1e-5);
+    close(grad[1], 0.25, 1e-5);
 }
 
 #[test]
@@ -144,8 +172,8 @@ fn target_networks_receive_no_gradient() {
     let d = devices();
     let critic = TwinQ::new(3, 1, &d.train);
     let target = critic.valid();
-    let input = matrix(vec![0.1, 0.2, 0.3, -0.1, 0.0, 0.5], 2, 3, &d.plain);
-    let action = matrix(vec![0.3, -0.3], 2, 1, &d.plain);
+    let input = matrix(vec![0.1, 0.2, 0.3, -0.1, 0.0, 0.5], 2, 3, &d.plain).unsqueeze_dim(0);
+    let action = matrix(vec![0.3, -0.3], 2, 1, &d.plain).unsqueeze_dim(0);
     let y = target.min(input.clone(), action.clone());
     assert!(!y.is_tracked(), "the target's output is a constant");
     let loss = critic_loss(
@@ -153,7 +181,7 @@ fn target_networks_receive_no_gradient() {
         critic.q2.forward(input, action),
         y,
     );
-    let mut grads = loss.backward();
+    let mut grads = loss.sum().backward();
     assert!(
         GradientsParams::from_module(&mut grads, &target).is_empty(),
         "no gradient reaches the target critics"

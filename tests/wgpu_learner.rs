@@ -10,7 +10,7 @@
 
 mod common;
 
-use dhrl::algos::{ActMode, AgentSpec, AlgoSettings, names, random_batch};
+use dhrl::algos::{ActMode, AgentSpec, AlgoSettings, UpdateContext, names, random_batch};
 use dhrl::learn::{Devices, LearnDevice, SOFTWARE_WGPU, real_gpu_adapters};
 
 /// Whether a real GPU is there, or a software adapter was opted into with
@@ -161,6 +161,72 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
                 &reference,
                 &free,
                 &format!("{algo}: delay-free actions on CPU, on wgpu"),
+            );
+        }
+    }
+}
+
+/// A stack of two runs on both devices (each run's networks, optimisers and noise saved on
+/// the CPU and loaded onto the GPU): every run's statistics of two updates, each run on its
+/// own batches, and each run's actions agree within the 1e-3 above, for every algorithm (the
+/// stacked learners' batched products and summed losses on wgpu included).
+#[test]
+fn every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu() {
+    if !gpu_present("every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu") {
+        return;
+    }
+    let (cpu, gpu) = (
+        Devices::new(LearnDevice::Cpu).unwrap(),
+        Devices::new(LearnDevice::Wgpu).unwrap(),
+    );
+    for algo in names() {
+        let mut settings = AlgoSettings::new(algo).unwrap();
+        if settings.fields().contains_key("dropout") {
+            settings.set("dropout=0.0").unwrap();
+        }
+        let spec = spec(if settings.info().undelayed_only { 0 } else { 3 });
+        let mut on_cpu = settings.build_stack(&spec, &cpu, &[7, 8]);
+        let mut on_gpu = settings.build_stack(&spec, &gpu, &[1, 2]);
+        assert_eq!((on_cpu.runs(), on_gpu.runs()), (2, 2), "{algo}");
+        let saved = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
+        let dirs: Vec<&std::path::Path> = saved.iter().map(|d| d.path()).collect();
+        on_cpu.save_runs(&dirs).unwrap();
+        on_gpu.load_runs(&dirs).unwrap();
+        for step in 0..2 {
+            let batches = [
+                random_batch(&spec, 64, 100 + step),
+                random_batch(&spec, 64, 200 + step),
+            ];
+            let update = |agent: &mut dyn dhrl::algos::Agent| {
+                let mut contexts: Vec<UpdateContext> = batches
+                    .iter()
+                    .map(|batch| UpdateContext::fixed(batch, 0, 0))
+                    .collect();
+                agent.update_runs(&mut contexts).unwrap()
+            };
+            let (a, b) = (update(on_cpu.as_mut()), update(on_gpu.as_mut()));
+            assert_eq!(a.len(), 2, "{algo}: one set of statistics per run");
+            assert_ne!(a[0], a[1], "{algo}: the runs' batches and networks differ");
+            for (run, (a, b)) in a.iter().zip(&b).enumerate() {
+                for ((name, x), (other, y)) in a.iter().zip(b) {
+                    assert_eq!(name, other);
+                    assert!(
+                        close(*x, *y, 1e-3),
+                        "{algo} run {run} update {step}: {name} {x} on CPU, {y} on wgpu"
+                    );
+                }
+            }
+        }
+        let probe = random_batch(&spec, 16, 9);
+        for run in 0..2 {
+            let (a, b) = (
+                on_cpu.act_run(run, &probe.augmented, 16, ActMode::Deterministic),
+                on_gpu.act_run(run, &probe.augmented, 16, ActMode::Deterministic),
+            );
+            assert_actions_close(
+                &a,
+                &b,
+                &format!("{algo} run {run}: actions on CPU, on wgpu"),
             );
         }
     }

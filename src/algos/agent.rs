@@ -82,6 +82,38 @@ pub trait Agent: Send {
     /// What [`Agent::act`] computes in [`ActMode::Deterministic`], as plain numbers (`dhrl
     /// export`).
     fn acting_network(&self) -> ActingNetwork;
+
+    // A stack: S runs of one configuration (their seeds apart) trained side by side, each
+    // with its own batches, random streams and folder. A solo agent is a stack of one, which
+    // the defaults below describe; the methods above are run 0's.
+
+    /// How many runs the agent trains side by side.
+    fn runs(&self) -> usize {
+        1
+    }
+    /// [`Agent::act`] for run `run`.
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+        assert_eq!(run, 0, "a solo agent has run 0 only");
+        self.act(augmented, rows, mode)
+    }
+    /// One update of every run, run `i` drawing from `contexts[i]`; each run's statistics.
+    fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<Vec<Stats>, ReplayError> {
+        assert_eq!(contexts.len(), 1, "a solo agent updates one run");
+        Ok(vec![self.update(&mut contexts[0])?])
+    }
+    /// [`Agent::save`] of run `i` into `dirs[i]`, each as a solo run of its seed writes it.
+    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
+        assert_eq!(dirs.len(), 1, "a solo agent saves one run");
+        self.save(dirs[0])
+    }
+    /// Restores run `i` from `dirs[i]` (what [`Agent::save_runs`] or a solo run wrote).
+    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
+        assert_eq!(dirs.len(), 1, "a solo agent loads one run");
+        self.load(dirs[0])
+    }
 }
 
 /// `n` random transitions at `spec`'s sizes, with their intermediate states (values uniform
@@ -256,6 +288,20 @@ pub trait AlgoConfig:
     fn validate(&self) -> Result<(), AlgoError>;
     /// The agent, for tasks of `spec`'s sizes, seeded with `seed`.
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent>;
+    /// The runs of `seeds` as one agent ([`Agent::runs`] = `seeds.len()`): by default each
+    /// run its own solo agent, updated one after the other; an algorithm whose learners are
+    /// stacked ([`crate::learn::stack`]) builds one learner for all of them.
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        match seeds {
+            [seed] => self.build(spec, devices, *seed),
+            _ => Box::new(super::independent::Independent::new(
+                seeds
+                    .iter()
+                    .map(|&seed| self.build(spec, devices, seed))
+                    .collect(),
+            )),
+        }
+    }
 }
 
 /// The TOML value of a field's default, for `--help-config`.

@@ -43,7 +43,11 @@ impl AlgoConfig for Config {
     }
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        Box::new(Bpql::new(spec, &self.sac, devices, seed))
+        self.build_stack(spec, devices, &[seed])
+    }
+
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        Box::new(Bpql::stacked(spec, &self.sac, devices, seeds))
     }
 }
 
@@ -52,43 +56,48 @@ pub struct Bpql {
     learner: SacLearner,
 }
 
-/// BPQL's learner: a [`SacLearner`] with the actor on `x` and the critics on `s`. D2HPG's
-/// regular learner is the same.
+/// BPQL's learner for the runs of `seeds`: a [`SacLearner`] with the actor on `x` and the
+/// critics on `s`. D2HPG's regular learner is the same.
 pub fn bpql_learner(
     spec: &AgentSpec,
     hyper: &SacConfig,
     devices: &Devices,
-    seed: u64,
+    seeds: &[u64],
 ) -> SacLearner {
-    SacLearner::new(
+    SacLearner::stacked(
         spec.augmented_dim(),
         spec.obs_dim,
         spec,
         hyper,
         devices,
-        seed,
+        seeds,
     )
 }
 
 impl Bpql {
+    /// One run's agent.
     pub fn new(spec: &AgentSpec, hyper: &SacConfig, devices: &Devices, seed: u64) -> Bpql {
+        Bpql::stacked(spec, hyper, devices, &[seed])
+    }
+
+    /// The runs of `seeds`, one stacked learner.
+    pub fn stacked(spec: &AgentSpec, hyper: &SacConfig, devices: &Devices, seeds: &[u64]) -> Bpql {
         Bpql {
             spec: spec.clone(),
-            learner: bpql_learner(spec, hyper, devices, seed),
+            learner: bpql_learner(spec, hyper, devices, seeds),
         }
     }
 }
 
 impl Agent for Bpql {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.learner
-            .act(augmented, rows, self.spec.augmented_dim(), mode)
+        self.act_run(0, augmented, rows, mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::Policy {
             input: PolicyInput::AugmentedState,
-            policy: self.learner.actor.weights(),
+            policy: self.learner.actor.weights(0),
         }
     }
 
@@ -97,19 +106,45 @@ impl Agent for Bpql {
     }
 
     fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        let batch = ctx.batch()?;
-        let stats = self
-            .learner
-            .update(&beta_batch(&batch, &self.learner.devices.plain));
-        Ok(stats.named())
+        Ok(self.update_runs(std::slice::from_mut(ctx))?.remove(0))
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.learner.save(dir, "")
+        self.save_runs(&[dir])
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.learner.load(dir, "")
+        self.load_runs(&[dir])
+    }
+
+    fn runs(&self) -> usize {
+        self.learner.runs()
+    }
+
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+        let width = self.spec.augmented_dim();
+        self.learner.act_run(run, augmented, rows, width, mode)
+    }
+
+    fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<Vec<Stats>, ReplayError> {
+        let plain = self.learner.devices.plain.clone();
+        let batches = contexts
+            .iter_mut()
+            .map(|ctx| Ok(beta_batch(&ctx.batch()?, &plain)))
+            .collect::<Result<Vec<_>, ReplayError>>()?;
+        let stats = self.learner.update(&SacBatch::stack(batches));
+        Ok(stats.iter().map(SacStats::named).collect())
+    }
+
+    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.learner.save(dirs, "")
+    }
+
+    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.learner.load(dirs, "")
     }
 }
 

@@ -31,7 +31,9 @@ use super::context::UpdateContext;
 use super::sac::{Config as SacConfig, SacBatch, SacLearner};
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
-use crate::learn::{CheckpointDir, Devices, LearnError, Noise, lifting_loss, squashed_samples_k};
+use crate::learn::{
+    CheckpointDir, Devices, LearnError, Noise, lifting_loss, one_run, squashed_samples_k,
+};
 use crate::seeds;
 
 crate::algo_config! {
@@ -178,7 +180,7 @@ impl D2hpg {
             regular_kind,
             lifting_weight: config.lifting_weight,
             lifting_samples: config.lifting_samples,
-            regular: bpql_learner(spec, &config.sac, devices, seed),
+            regular: bpql_learner(spec, &config.sac, devices, &[seed]),
             delay_free: SacLearner::new(
                 spec.obs_dim,
                 spec.obs_dim,
@@ -195,20 +197,20 @@ impl D2hpg {
 impl Agent for D2hpg {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         self.regular
-            .act(augmented, rows, self.spec.augmented_dim(), mode)
+            .act_run(0, augmented, rows, self.spec.augmented_dim(), mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::Policy {
             input: PolicyInput::AugmentedState,
-            policy: self.regular.actor.weights(),
+            policy: self.regular.actor.weights(0),
         }
     }
 
     fn act_delay_free(&mut self, states: &[f32], rows: usize) -> Option<Vec<f32>> {
         Some(
             self.delay_free
-                .act(states, rows, self.spec.obs_dim, ActMode::Deterministic),
+                .act_run(0, states, rows, self.spec.obs_dim, ActMode::Deterministic),
         )
     }
 
@@ -238,7 +240,10 @@ impl Agent for D2hpg {
         let (rows, k, act) = (batch.len(), self.lifting_samples, self.spec.act_dim);
         let with_bpql = self.regular_kind == Regular::Bpql;
         let (regular, delay_free) = (&mut self.regular, &mut self.delay_free);
-        let (alpha, free_alpha) = (regular.temperature.alpha(), delay_free.temperature.alpha());
+        let (alpha, free_alpha) = (
+            regular.temperature.alphas()[0],
+            delay_free.temperature.alphas()[0],
+        );
 
         // 1. The critics of both learners (the pseudo-code's joint critic step): the beta
         //    critic on (s, a) for BPQL, the delay-free critic on the time-aligned (s, a, r, s');
@@ -263,13 +268,14 @@ impl Agent for D2hpg {
         //    (common random numbers): the two sets of moments are then equal exactly when the
         //    two distributions are. L_lift (Eq. 4) is logged unweighted.
         let eps = self.lifting_noise.normal3(k, rows, act, &plain);
-        let (free_mean, free_log_std) = free_distribution.clone();
+        let (free_mean, free_log_std) = one_run(free_distribution.clone());
         let free_actions = squashed_samples_k(
             (free_mean.inner(), free_log_std.inner()),
             eps.clone(),
             &delay_free.scale,
         );
-        let regular_actions = squashed_samples_k(regular_distribution.clone(), eps, &regular.scale);
+        let regular_actions =
+            squashed_samples_k(one_run(regular_distribution.clone()), eps, &regular.scale);
         let lifting = lifting_loss(regular_actions, free_actions);
         let lifting_value = f64::from(lifting.clone().inner().into_scalar::<f32>());
         let lift = lifting.mul_scalar(self.lifting_weight);
@@ -293,13 +299,13 @@ impl Agent for D2hpg {
 
         let mut stats: Stats = FREE_STATS
             .into_iter()
-            .zip([free_critic_loss, free_actor_loss, free_alpha])
+            .zip([free_critic_loss[0], free_actor_loss[0], free_alpha])
             .collect();
         if let (Some(critic_loss), Some(actor_loss)) = (critic_loss, actor_loss) {
             stats.extend(
                 REGULAR_STATS
                     .into_iter()
-                    .zip([critic_loss, actor_loss, alpha]),
+                    .zip([critic_loss[0], actor_loss[0], alpha]),
             );
         }
         stats.push((LIFTING_STAT, lifting_value));
@@ -307,14 +313,14 @@ impl Agent for D2hpg {
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.regular.save(dir, "regular_")?;
-        self.delay_free.save(dir, "delay_free_")?;
+        self.regular.save(&[dir], "regular_")?;
+        self.delay_free.save(&[dir], "delay_free_")?;
         CheckpointDir::new(dir).save_json("lifting_noise.json", &self.lifting_noise)
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.regular.load(dir, "regular_")?;
-        self.delay_free.load(dir, "delay_free_")?;
+        self.regular.load(&[dir], "regular_")?;
+        self.delay_free.load(&[dir], "delay_free_")?;
         self.lifting_noise = CheckpointDir::new(dir).load_json("lifting_noise.json")?;
         Ok(())
     }

@@ -63,7 +63,7 @@ use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
     CheckpointDir, Devices, LearnError, Mlp, MlpConfig, Noise, TransitionTensors, adam,
-    lifting_loss, materialize, squashed_samples_k,
+    lifting_loss, materialize, one_run, squashed_samples_k,
 };
 use crate::seeds;
 
@@ -538,13 +538,13 @@ impl D2hpgPrincipled {
             AbstractReward::Replay => t.reward.clone(),
         };
         SacBatch {
-            actor_input: state.clone(),
-            critic_input: state,
-            action,
-            reward,
-            next_actor_input: next_state.clone(),
-            next_critic_input: next_state,
-            done: t.done.clone(),
+            actor_input: state.clone().unsqueeze_dim(0),
+            critic_input: state.unsqueeze_dim(0),
+            action: action.unsqueeze_dim(0),
+            reward: reward.unsqueeze_dim(0),
+            next_actor_input: next_state.clone().unsqueeze_dim(0),
+            next_critic_input: next_state.unsqueeze_dim(0),
+            done: t.done.clone().unsqueeze_dim(0),
         }
     }
 }
@@ -557,13 +557,13 @@ fn scalar(loss: &Tensor<1>) -> f64 {
 impl Agent for D2hpgPrincipled {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         self.regular
-            .act(augmented, rows, self.spec.augmented_dim(), mode)
+            .act_run(0, augmented, rows, self.spec.augmented_dim(), mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::Policy {
             input: PolicyInput::AugmentedState,
-            policy: self.regular.actor.weights(),
+            policy: self.regular.actor.weights(0),
         }
     }
 
@@ -603,8 +603,8 @@ impl Agent for D2hpgPrincipled {
         let (act, abstract_act) = (self.spec.act_dim, self.abstract_spec.act_dim);
         let (regular, abstract_learner) = (&mut self.regular, &mut self.abstract_learner);
         let (alpha, abstract_alpha) = (
-            regular.temperature.alpha(),
-            abstract_learner.temperature.alpha(),
+            regular.temperature.alphas()[0],
+            abstract_learner.temperature.alphas()[0],
         );
 
         // 24. Both critics, and both policies' distributions before either policy moves. The
@@ -631,16 +631,17 @@ impl Agent for D2hpgPrincipled {
         } else {
             self.lifting_noise.normal3(k, rows, abstract_act, &plain)
         };
-        let (abstract_mean, abstract_log_std) = abstract_distribution.clone();
+        let (abstract_mean, abstract_log_std) = one_run(abstract_distribution.clone());
         let abstract_actions = squashed_samples_k(
             (abstract_mean.inner(), abstract_log_std.inner()),
             abstract_eps,
             &abstract_learner.scale,
         );
-        let regular_actions = squashed_samples_k(regular_distribution.clone(), eps, &regular.scale);
+        let regular_actions =
+            squashed_samples_k(one_run(regular_distribution.clone()), eps, &regular.scale);
         let lifted = self
             .homomorphism
-            .abstract_actions_k(regular_batch.actor_input.clone(), regular_actions);
+            .abstract_actions_k(t.augmented.clone(), regular_actions);
         let lifting = lifting_loss(lifted, abstract_actions);
         let lifting_value = scalar(&lifting);
         let weighted_lifting = lifting.mul_scalar(self.config.lifting_weight);
@@ -657,7 +658,7 @@ impl Agent for D2hpgPrincipled {
                         regular_distribution,
                         Some(weighted_lifting),
                     );
-                    Some(loss)
+                    Some(loss[0])
                 } else {
                     // Line 24 is not optional: Q_φ1 and its targets train either way.
                     regular.update_actor_by(weighted_lifting);
@@ -670,11 +671,11 @@ impl Agent for D2hpgPrincipled {
 
         let mut stats: Stats = MODEL_STATS.into_iter().zip([lax, model]).collect();
         stats.extend(ABSTRACT_STATS.into_iter().zip([
-            abstract_critic_loss,
-            abstract_actor_loss,
+            abstract_critic_loss[0],
+            abstract_actor_loss[0],
             abstract_alpha,
         ]));
-        stats.extend(CRITIC_STATS.into_iter().zip([critic_loss, alpha]));
+        stats.extend(CRITIC_STATS.into_iter().zip([critic_loss[0], alpha]));
         if let Some(actor_loss) = actor_loss {
             stats.push((ACTOR_STAT, actor_loss));
         }
@@ -683,8 +684,8 @@ impl Agent for D2hpgPrincipled {
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.regular.save(dir, "regular_")?;
-        self.abstract_learner.save(dir, "abstract_")?;
+        self.regular.save(&[dir], "regular_")?;
+        self.abstract_learner.save(&[dir], "abstract_")?;
         let files = CheckpointDir::new(dir);
         files.save_module("homomorphism.bpk", &self.homomorphism)?;
         files.save_optimizer("homomorphism_adam.bpk", &self.homomorphism_opt)?;
@@ -693,8 +694,8 @@ impl Agent for D2hpgPrincipled {
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.regular.load(dir, "regular_")?;
-        self.abstract_learner.load(dir, "abstract_")?;
+        self.regular.load(&[dir], "regular_")?;
+        self.abstract_learner.load(&[dir], "abstract_")?;
         let files = CheckpointDir::new(dir);
         self.homomorphism = files.load_module("homomorphism.bpk", self.homomorphism.clone())?;
         self.homomorphism_opt =

@@ -285,8 +285,8 @@ impl Agent for DelayedSac {
             None => x, // Δ = 0: x_t = s_t
         };
         to_vec(match mode {
-            ActMode::Explore => self.learner.explore(predicted),
-            ActMode::Deterministic => self.learner.exploit(predicted),
+            ActMode::Explore => self.learner.explore(predicted.unsqueeze_dim(0)),
+            ActMode::Deterministic => self.learner.exploit(predicted.unsqueeze_dim(0)),
         })
     }
 
@@ -297,7 +297,7 @@ impl Agent for DelayedSac {
                 input_moments: self.model.moments.as_ref().map(InputMoments::mean_std),
                 predicts_difference: self.model.output == ModelOutput::Difference,
             },
-            policy: self.learner.actor.weights(),
+            policy: self.learner.actor.weights(0),
         }
     }
 
@@ -325,7 +325,7 @@ impl Agent for DelayedSac {
         // SAC on the true, time-aligned (s, a, r, s').
         let mut stats = self
             .learner
-            .update(&SacBatch::new(&tensors, on_state.clone(), on_state))
+            .update(&SacBatch::new(&tensors, on_state.clone(), on_state))[0]
             .named();
 
         // The Δ-step errors, then one model step on L_f, after merging the batch's inputs into
@@ -361,7 +361,7 @@ impl Agent for DelayedSac {
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.learner.save(dir, "")?;
+        self.learner.save(&[dir], "")?;
         let files = CheckpointDir::new(dir);
         files.save_module("model.bpk", &self.model.network)?;
         files.save_optimizer("model_adam.bpk", &self.model_opt)?;
@@ -369,7 +369,7 @@ impl Agent for DelayedSac {
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.learner.load(dir, "")?;
+        self.learner.load(&[dir], "")?;
         let files = CheckpointDir::new(dir);
         self.model.network = files.load_module("model.bpk", self.model.network.clone())?;
         self.model_opt = files.load_optimizer("model_adam.bpk", self.model_opt.clone())?;
@@ -466,8 +466,13 @@ mod tests {
         let mut agent = DelayedSac::new(&Config::default(), &spec(3), &devices, 0);
         agent.model = linear_model(&devices.plain);
         let acted = agent.act(&[1.0, 1.0, -1.0, 0.5], 1, ActMode::Deterministic);
-        let policy_at =
-            |s: f32| to_vec(agent.learner.exploit(matrix(vec![s], 1, 1, &devices.plain)));
+        let policy_at = |s: f32| {
+            to_vec(
+                agent
+                    .learner
+                    .exploit(matrix(vec![s], 1, 1, &devices.plain).unsqueeze_dim(0)),
+            )
+        };
         assert_eq!(acted, policy_at(5.875));
         assert_ne!(acted, policy_at(3.5));
         assert_ne!(acted, policy_at(1.0));

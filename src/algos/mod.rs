@@ -13,6 +13,7 @@ mod context;
 mod d2hpg;
 mod d2hpg_principled;
 mod delayed_sac;
+mod independent;
 mod naive_sac;
 mod registry;
 mod sac;

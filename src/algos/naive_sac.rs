@@ -27,12 +27,16 @@ impl AlgoConfig for Config {
     }
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        Box::new(SacAgent::new(
+        self.build_stack(spec, devices, &[seed])
+    }
+
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        Box::new(SacAgent::stacked(
             InputView::LastObservation,
             spec,
             &self.sac,
             devices,
-            seed,
+            seeds,
         ))
     }
 }

@@ -99,6 +99,8 @@ pub trait AnyConfig: Send + Sync {
     fn table(&self) -> toml::Table;
     /// The agent, for tasks of `spec`'s sizes, seeded with `seed`.
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent>;
+    /// The runs of `seeds` as one agent.
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent>;
     fn boxed_clone(&self) -> Box<dyn AnyConfig>;
 }
 
@@ -116,6 +118,10 @@ impl<C: AlgoConfig> AnyConfig for C {
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
         AlgoConfig::build(self, spec, devices, seed)
+    }
+
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        AlgoConfig::build_stack(self, spec, devices, seeds)
     }
 
     fn boxed_clone(&self) -> Box<dyn AnyConfig> {

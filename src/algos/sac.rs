@@ -19,8 +19,9 @@ use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::{ReplayError, Transitions};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, Temperature,
-    TransitionTensors, TwinQ, actor_loss, adam, critic_loss, critic_target, materialize, matrix,
-    polyak, rows, squashed_sample, temperature_loss, to_vec,
+    TransitionTensors, TwinQ, actor_loss, adam, batch_mean, critic_loss, critic_target,
+    load_optimizer_stack, load_stack, polyak, rows, slice, squashed_sample, stack,
+    temperature_loss, to_vec,
 };
 
 crate::algo_config! {
@@ -100,12 +101,16 @@ impl AlgoConfig for Config {
     }
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        Box::new(SacAgent::new(
+        self.build_stack(spec, devices, &[seed])
+    }
+
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        Box::new(SacAgent::stacked(
             InputView::TrueState,
             spec,
             self,
             devices,
-            seed,
+            seeds,
         ))
     }
 }
@@ -137,35 +142,60 @@ impl SacStats {
 
 /// One SAC batch: what the actor and the critics condition on (the same for SAC itself; the
 /// augmented state for the actor and the true state for the critics in BPQL), now and next.
-/// All `[B, ·]` tensors on the plain device; `done` is 1 where the MDP terminated.
+/// All `[S, B, ·]` tensors on the plain device, one batch per run of the stack; `done` is 1
+/// where the MDP terminated.
 #[derive(Debug, Clone)]
 pub struct SacBatch {
-    pub actor_input: Tensor<2>,
-    pub critic_input: Tensor<2>,
-    pub action: Tensor<2>,
-    pub reward: Tensor<2>,
-    pub next_actor_input: Tensor<2>,
-    pub next_critic_input: Tensor<2>,
-    pub done: Tensor<2>,
+    pub actor_input: Tensor<3>,
+    pub critic_input: Tensor<3>,
+    pub action: Tensor<3>,
+    pub reward: Tensor<3>,
+    pub next_actor_input: Tensor<3>,
+    pub next_critic_input: Tensor<3>,
+    pub done: Tensor<3>,
 }
 
 impl SacBatch {
-    /// The actions, rewards and terminations of `t`, with the actor on `actor` and the critics
-    /// on `critic` (each `(now, next)`).
+    /// One run's batch (S = 1): the actions, rewards and terminations of `t`, with the actor on
+    /// `actor` and the critics on `critic` (each `(now, next)`, `[B, ·]`).
     pub fn new(
         t: &TransitionTensors,
         (actor_input, next_actor_input): (Tensor<2>, Tensor<2>),
         (critic_input, next_critic_input): (Tensor<2>, Tensor<2>),
     ) -> SacBatch {
         SacBatch {
-            actor_input,
-            critic_input,
-            action: t.action.clone(),
-            reward: t.reward.clone(),
-            next_actor_input,
-            next_critic_input,
-            done: t.done.clone(),
+            actor_input: actor_input.unsqueeze_dim(0),
+            critic_input: critic_input.unsqueeze_dim(0),
+            action: t.action.clone().unsqueeze_dim(0),
+            reward: t.reward.clone().unsqueeze_dim(0),
+            next_actor_input: next_actor_input.unsqueeze_dim(0),
+            next_critic_input: next_critic_input.unsqueeze_dim(0),
+            done: t.done.clone().unsqueeze_dim(0),
         }
+    }
+
+    /// The runs' batches, in order, as one stack's.
+    pub fn stack(batches: Vec<SacBatch>) -> SacBatch {
+        if batches.len() == 1 {
+            return batches.into_iter().next().expect("one batch");
+        }
+        let field = |f: fn(&SacBatch) -> &Tensor<3>| {
+            Tensor::cat(batches.iter().map(|b| f(b).clone()).collect(), 0)
+        };
+        SacBatch {
+            actor_input: field(|b| &b.actor_input),
+            critic_input: field(|b| &b.critic_input),
+            action: field(|b| &b.action),
+            reward: field(|b| &b.reward),
+            next_actor_input: field(|b| &b.next_actor_input),
+            next_critic_input: field(|b| &b.next_critic_input),
+            done: field(|b| &b.done),
+        }
+    }
+
+    /// Rows per run.
+    fn rows(&self) -> usize {
+        self.reward.dims()[1]
     }
 }
 
@@ -178,7 +208,10 @@ pub struct LearningRates {
     pub temperature: f64,
 }
 
-/// SAC with a policy `π(a | actor input)` and twin critics `Q(critic input, a)`.
+/// SAC with a policy `π(a | actor input)` and twin critics `Q(critic input, a)`, for a stack
+/// of S independent runs (a solo run is S = 1): every network stacked
+/// ([`crate::learn::stack`]), every loss summed over the runs so that each run's gradient is
+/// its solo gradient, a temperature and a noise stream per run.
 pub struct SacLearner {
     pub actor: GaussianPolicy,
     pub critic: TwinQ,
@@ -194,13 +227,14 @@ pub struct SacLearner {
     /// `H̄ = −dim(A)`.
     target_entropy: f64,
     pub devices: Devices,
-    pub noise: Noise,
+    /// One stream per run: exploration and the updates' samples.
+    pub noise: Vec<Noise>,
     act_dim: usize,
 }
 
 impl SacLearner {
-    /// Networks drawn from burn's generator seeded with `seed` (so a learner is reproducible
-    /// whatever was built before it), exploration noise from its own stream.
+    /// One run's learner: networks drawn from burn's generator seeded with `seed` (so a
+    /// learner is reproducible whatever was built before it), noise from its own stream.
     pub fn new(
         actor_dim: usize,
         critic_dim: usize,
@@ -209,16 +243,39 @@ impl SacLearner {
         devices: &Devices,
         seed: u64,
     ) -> SacLearner {
-        devices.train.seed(seed);
-        let actor = GaussianPolicy::new(actor_dim, spec.act_dim, &devices.train);
-        materialize(&actor);
-        let critic = TwinQ::new(critic_dim, spec.act_dim, &devices.train);
-        materialize(&critic);
+        SacLearner::stacked(actor_dim, critic_dim, spec, hyper, devices, &[seed])
+    }
+
+    /// The learners of runs `seeds` in one stack: slice `i` is drawn as
+    /// [`SacLearner::new`] with `seeds[i]` draws it.
+    pub fn stacked(
+        actor_dim: usize,
+        critic_dim: usize,
+        spec: &AgentSpec,
+        hyper: &Config,
+        devices: &Devices,
+        seeds: &[u64],
+    ) -> SacLearner {
+        let (actors, critics): (Vec<_>, Vec<_>) = seeds
+            .iter()
+            .map(|&seed| {
+                devices.train.seed(seed);
+                let actor = GaussianPolicy::new(actor_dim, spec.act_dim, &devices.train);
+                let critic = TwinQ::new(critic_dim, spec.act_dim, &devices.train);
+                (actor, critic)
+            })
+            .unzip();
+        let critic = stack(critics);
         SacLearner {
             target: critic.valid(),
-            actor,
+            actor: stack(actors),
             critic,
-            temperature: Temperature::new(hyper.initial_alpha, &devices.train),
+            temperature: stack(
+                seeds
+                    .iter()
+                    .map(|_| Temperature::new(hyper.initial_alpha, &devices.train))
+                    .collect(),
+            ),
             actor_opt: adam(hyper.adam_epsilon),
             critic_opt: adam(hyper.adam_epsilon),
             temperature_opt: adam(hyper.adam_epsilon),
@@ -231,44 +288,70 @@ impl SacLearner {
             },
             target_entropy: -(spec.act_dim as f64),
             devices: devices.clone(),
-            noise: Noise::new(crate::seeds::learner_noise(seed)),
+            noise: seeds
+                .iter()
+                .map(|&seed| Noise::new(crate::seeds::learner_noise(seed)))
+                .collect(),
             act_dim: spec.act_dim,
         }
     }
 
-    /// A sampled action `a ~ π(·|input)` per row, from the current actor (no graph).
-    pub fn explore(&mut self, input: Tensor<2>) -> Tensor<2> {
-        let rows = input.dims()[0];
-        let eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
+    /// How many runs the stack holds.
+    pub fn runs(&self) -> usize {
+        self.noise.len()
+    }
+
+    /// `[S, rows, A]` standard normal draws, each run's from its own stream.
+    fn normal(&mut self, rows: usize) -> Tensor<3> {
+        Noise::stacked_normal(&mut self.noise, rows, self.act_dim, &self.devices.plain)
+    }
+
+    /// A sampled action `a ~ π(·|input)` per row of each run, `[S, B, A]` (no graph).
+    pub fn explore(&mut self, input: Tensor<3>) -> Tensor<3> {
+        let eps = self.normal(input.dims()[1]);
         self.actor.valid().sample(input, eps, &self.scale).action
     }
 
-    /// The deterministic action `tanh(μ)` per row.
-    pub fn exploit(&self, input: Tensor<2>) -> Tensor<2> {
+    /// The deterministic action `tanh(μ)` per row, `[S, B, A]`.
+    pub fn exploit(&self, input: Tensor<3>) -> Tensor<3> {
         self.actor.valid().mode(input, &self.scale)
     }
 
-    /// Actions `[rows, act_dim]` for `rows` inputs of width `width` (row-major).
-    pub fn act(&mut self, inputs: &[f32], rows: usize, width: usize, mode: ActMode) -> Vec<f32> {
-        let input = matrix(
-            inputs[..rows * width].to_vec(),
-            rows,
-            width,
-            &self.devices.plain,
+    /// Actions `[rows, act_dim]` of run `run` for its `rows` inputs of width `width`
+    /// (row-major), from its policy and its noise stream.
+    pub fn act_run(
+        &mut self,
+        run: usize,
+        inputs: &[f32],
+        rows: usize,
+        width: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let plain = self.devices.plain.clone();
+        let input = Tensor::from_data(
+            TensorData::new(inputs[..rows * width].to_vec(), [1, rows, width]),
+            &plain,
         );
+        let actor = match self.runs() {
+            1 => self.actor.valid(),
+            _ => slice(&self.actor.valid(), run),
+        };
         to_vec(match mode {
-            ActMode::Explore => self.explore(input),
-            ActMode::Deterministic => self.exploit(input),
+            ActMode::Explore => {
+                let eps =
+                    Noise::stacked_normal(&mut self.noise[run..=run], rows, self.act_dim, &plain);
+                actor.sample(input, eps, &self.scale).action
+            }
+            ActMode::Deterministic => actor.mode(input, &self.scale),
         })
     }
 
     /// Critics (Eq. 3, 5): `y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|x'))`, `a' ~ π(·|x')`.
-    /// Returns the loss. Leaves the actor as it is, so that [`SacLearner::distribution`] may
-    /// run before or after it.
-    pub fn update_critics(&mut self, batch: &SacBatch) -> f64 {
-        let rows = batch.reward.dims()[0];
-        let alpha = self.temperature.alpha();
-        let next_eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
+    /// Returns each run's loss. Leaves the actor as it is, so that
+    /// [`SacLearner::distribution`] may run before or after it.
+    pub fn update_critics(&mut self, batch: &SacBatch) -> Vec<f64> {
+        let alpha = self.temperature.alpha_tensor();
+        let next_eps = self.normal(batch.rows());
         let next = self
             .actor
             .valid()
@@ -292,64 +375,64 @@ impl SacLearner {
             .critic
             .q2
             .forward(batch.critic_input.clone(), batch.action.clone());
-        let loss = critic_loss(q1, q2, y);
-        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
-        let grads = GradientsParams::from_grads(loss.backward(), &self.critic);
+        let losses = critic_loss(q1, q2, y);
+        let values = per_run(losses.clone());
+        let grads = GradientsParams::from_grads(losses.sum().backward(), &self.critic);
         self.critic = self
             .critic_opt
             .step(self.rates.critic, self.critic.clone(), grads);
-        value
+        values
     }
 
-    /// The actor's `(μ, log σ)` at the batch's actor input, on the autodiff graph: what
-    /// [`SacLearner::update_policy`] steps from, and what other losses on the same policy
-    /// (D2HPG's lifting term) share.
-    pub fn distribution(&self, batch: &SacBatch) -> (Tensor<2>, Tensor<2>) {
+    /// The actor's `(μ, log σ)` at the batch's actor input, `[S, B, A]`, on the autodiff
+    /// graph: what [`SacLearner::update_policy`] steps from, and what other losses on the same
+    /// policy (D2HPG's lifting term) share.
+    pub fn distribution(&self, batch: &SacBatch) -> (Tensor<3>, Tensor<3>) {
         self.actor.distribution(batch.actor_input.clone())
     }
 
-    /// [`SacLearner::update_actor_and_temperature`], then the targets. Returns the actor's SAC
-    /// loss and the temperature's loss.
+    /// [`SacLearner::update_actor_and_temperature`], then the targets. Returns each run's
+    /// actor SAC loss and temperature loss.
     pub fn update_policy(
         &mut self,
         batch: &SacBatch,
-        distribution: (Tensor<2>, Tensor<2>),
+        distribution: (Tensor<3>, Tensor<3>),
         extra: Option<Tensor<1>>,
-    ) -> (f64, f64) {
+    ) -> (Vec<f64>, Vec<f64>) {
         let losses = self.update_actor_and_temperature(batch, distribution, extra);
         self.update_targets();
         losses
     }
 
     /// Actor (Eq. 7): `α log π(a|x) − min Q(s, a)`, `a ~ π(·|x)` from `distribution`, critics
-    /// held fixed, plus `extra` (a loss on the same distribution) in the same step; then the
-    /// temperature. Returns the actor's SAC loss and the temperature's loss.
+    /// held fixed, plus `extra` (a loss on the same distribution, summed over the runs) in the
+    /// same step; then the temperature. Returns each run's actor SAC loss and temperature loss.
     pub fn update_actor_and_temperature(
         &mut self,
         batch: &SacBatch,
-        distribution: (Tensor<2>, Tensor<2>),
+        distribution: (Tensor<3>, Tensor<3>),
         extra: Option<Tensor<1>>,
-    ) -> (f64, f64) {
-        let rows = batch.reward.dims()[0];
-        let alpha = self.temperature.alpha();
-        let eps = self.noise.normal(rows, self.act_dim, &self.devices.plain);
+    ) -> (Vec<f64>, Vec<f64>) {
+        let alpha = self.temperature.alpha_tensor();
+        let eps = self.normal(batch.rows());
         let pi = squashed_sample(distribution, eps, &self.scale);
-        let mean_log_prob = f64::from(pi.log_prob.clone().inner().mean().into_scalar::<f32>());
+        let mean_log_prob: Vec<f64> = per_run(batch_mean(pi.log_prob.clone().inner()));
         let q = self
             .critic
             .valid()
             .min(batch.critic_input.clone(), pi.action);
-        let loss = actor_loss(pi.log_prob, q, alpha);
-        let actor_loss = f64::from(loss.clone().inner().into_scalar::<f32>());
+        let losses = actor_loss(pi.log_prob, q, alpha);
+        let actor_losses = per_run(losses.clone());
+        let loss = losses.sum();
         self.update_actor_by(match extra {
             Some(extra) => loss + extra,
             None => loss,
         });
-        let alpha_loss = self.update_temperature(mean_log_prob);
-        (actor_loss, alpha_loss)
+        let alpha_losses = self.update_temperature(&mean_log_prob);
+        (actor_losses, alpha_losses)
     }
 
-    /// One Adam step of the actor on `loss`.
+    /// One Adam step of the actor on `loss` (one number: the runs' losses summed).
     pub fn update_actor_by(&mut self, loss: Tensor<1>) {
         let grads = GradientsParams::from_grads(loss.backward(), &self.actor);
         self.actor = self
@@ -357,23 +440,23 @@ impl SacLearner {
             .step(self.rates.actor, self.actor.clone(), grads);
     }
 
-    /// Temperature (Eq. 18): `−α(log π + H̄)`, toward the target entropy; returns the loss
-    /// (0 when α is fixed).
-    fn update_temperature(&mut self, mean_log_prob: f64) -> f64 {
+    /// Temperature (Eq. 18): `−α(log π + H̄)`, toward the target entropy; returns each run's
+    /// loss (0 when α is fixed).
+    fn update_temperature(&mut self, mean_log_prob: &[f64]) -> Vec<f64> {
         if !self.hyper.autotune_alpha {
-            return 0.0;
+            return vec![0.0; self.runs()];
         }
-        let loss = temperature_loss(
+        let losses = temperature_loss(
             self.temperature.log_alpha.val(),
             mean_log_prob,
             self.target_entropy,
         );
-        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
-        let grads = GradientsParams::from_grads(loss.backward(), &self.temperature);
+        let values = per_run(losses.clone());
+        let grads = GradientsParams::from_grads(losses.sum().backward(), &self.temperature);
         self.temperature =
             self.temperature_opt
                 .step(self.rates.temperature, self.temperature.clone(), grads);
-        value
+        values
     }
 
     /// Targets: `θ̄ ← τθ + (1 − τ)θ̄`.
@@ -381,49 +464,64 @@ impl SacLearner {
         self.target = polyak(self.target.clone(), &self.critic, self.hyper.tau);
     }
 
-    /// One SAC update: critics, actor, temperature, targets.
-    pub fn update(&mut self, batch: &SacBatch) -> SacStats {
-        let alpha = self.temperature.alpha();
-        let critic_loss = self.update_critics(batch);
+    /// One SAC update of every run: critics, actor, temperature, targets.
+    pub fn update(&mut self, batch: &SacBatch) -> Vec<SacStats> {
+        let alphas = self.temperature.alphas();
+        let critic_losses = self.update_critics(batch);
         let distribution = self.distribution(batch);
-        let (actor_loss, alpha_loss) = self.update_policy(batch, distribution, None);
-        SacStats {
-            critic_loss,
-            actor_loss,
-            alpha,
-            alpha_loss,
+        let (actor_losses, alpha_losses) = self.update_policy(batch, distribution, None);
+        (0..self.runs())
+            .map(|i| SacStats {
+                critic_loss: critic_losses[i],
+                actor_loss: actor_losses[i],
+                alpha: alphas[i],
+                alpha_loss: alpha_losses[i],
+            })
+            .collect()
+    }
+
+    /// Saves run `i`'s networks, optimiser states and noise stream as
+    /// `dirs[i]/{prefix}*.bpk|json`, each in a solo run's shapes.
+    pub fn save(&self, dirs: &[&Path], prefix: &str) -> Result<(), LearnError> {
+        for (slice, dir) in dirs.iter().enumerate() {
+            let files = CheckpointDir::with_prefix(dir, prefix);
+            files.save_slice("actor.bpk", &self.actor, slice)?;
+            files.save_slice("critic.bpk", &self.critic, slice)?;
+            files.save_slice("critic_target.bpk", &self.target, slice)?;
+            files.save_slice("temperature.bpk", &self.temperature, slice)?;
+            files.save_optimizer_slice("actor_adam.bpk", &self.actor_opt, slice)?;
+            files.save_optimizer_slice("critic_adam.bpk", &self.critic_opt, slice)?;
+            files.save_optimizer_slice("temperature_adam.bpk", &self.temperature_opt, slice)?;
+            files.save_json("noise.json", &self.noise[slice])?;
         }
-    }
-
-    /// Saves networks, optimiser states and the noise stream as `dir/{prefix}*.bpk|json`.
-    pub fn save(&self, dir: &Path, prefix: &str) -> Result<(), LearnError> {
-        let files = CheckpointDir::with_prefix(dir, prefix);
-        files.save_module("actor.bpk", &self.actor)?;
-        files.save_module("critic.bpk", &self.critic)?;
-        files.save_module("critic_target.bpk", &self.target)?;
-        files.save_module("temperature.bpk", &self.temperature)?;
-        files.save_optimizer("actor_adam.bpk", &self.actor_opt)?;
-        files.save_optimizer("critic_adam.bpk", &self.critic_opt)?;
-        files.save_optimizer("temperature_adam.bpk", &self.temperature_opt)?;
-        files.save_json("noise.json", &self.noise)
-    }
-
-    /// Restores what [`SacLearner::save`] wrote with the same `prefix`.
-    pub fn load(&mut self, dir: &Path, prefix: &str) -> Result<(), LearnError> {
-        let files = CheckpointDir::with_prefix(dir, prefix);
-        self.actor = files.load_module("actor.bpk", self.actor.clone())?;
-        self.critic = files.load_module("critic.bpk", self.critic.clone())?;
-        self.target = files
-            .load_module("critic_target.bpk", self.target.clone())?
-            .valid();
-        self.temperature = files.load_module("temperature.bpk", self.temperature.clone())?;
-        self.actor_opt = files.load_optimizer("actor_adam.bpk", self.actor_opt.clone())?;
-        self.critic_opt = files.load_optimizer("critic_adam.bpk", self.critic_opt.clone())?;
-        self.temperature_opt =
-            files.load_optimizer("temperature_adam.bpk", self.temperature_opt.clone())?;
-        self.noise = files.load_json("noise.json")?;
         Ok(())
     }
+
+    /// Restores what [`SacLearner::save`] wrote with the same `prefix`, run `i` from `dirs[i]`.
+    pub fn load(&mut self, dirs: &[&Path], prefix: &str) -> Result<(), LearnError> {
+        let files: Vec<CheckpointDir> = dirs
+            .iter()
+            .map(|dir| CheckpointDir::with_prefix(dir, prefix))
+            .collect();
+        self.actor = load_stack(&files, "actor.bpk", self.actor.clone())?;
+        self.critic = load_stack(&files, "critic.bpk", self.critic.clone())?;
+        self.target = load_stack(&files, "critic_target.bpk", self.target.clone())?.valid();
+        self.temperature = load_stack(&files, "temperature.bpk", self.temperature.clone())?;
+        self.actor_opt = load_optimizer_stack(&files, "actor_adam.bpk", self.actor_opt.clone())?;
+        self.critic_opt = load_optimizer_stack(&files, "critic_adam.bpk", self.critic_opt.clone())?;
+        self.temperature_opt =
+            load_optimizer_stack(&files, "temperature_adam.bpk", self.temperature_opt.clone())?;
+        self.noise = files
+            .iter()
+            .map(|files| files.load_json("noise.json"))
+            .collect::<Result<_, _>>()?;
+        Ok(())
+    }
+}
+
+/// A `[S]` tensor's values, one per run.
+fn per_run(values: Tensor<1>) -> Vec<f64> {
+    to_vec(values.inner()).into_iter().map(f64::from).collect()
 }
 
 /// Which part of a transition the SAC baselines condition on.
@@ -472,7 +570,7 @@ impl InputView {
     }
 }
 
-/// A SAC baseline: [`SacLearner`] on one [`InputView`].
+/// A SAC baseline: [`SacLearner`] on one [`InputView`], for a stack of runs.
 pub struct SacAgent {
     view: InputView,
     spec: AgentSpec,
@@ -480,6 +578,7 @@ pub struct SacAgent {
 }
 
 impl SacAgent {
+    /// One run's agent.
     pub fn new(
         view: InputView,
         spec: &AgentSpec,
@@ -487,31 +586,51 @@ impl SacAgent {
         devices: &Devices,
         seed: u64,
     ) -> SacAgent {
+        SacAgent::stacked(view, spec, hyper, devices, &[seed])
+    }
+
+    /// The runs of `seeds`, one stacked learner.
+    pub fn stacked(
+        view: InputView,
+        spec: &AgentSpec,
+        hyper: &Config,
+        devices: &Devices,
+        seeds: &[u64],
+    ) -> SacAgent {
         SacAgent {
             view,
             spec: spec.clone(),
-            learner: SacLearner::new(
+            learner: SacLearner::stacked(
                 view.width(spec),
                 view.width(spec),
                 spec,
                 hyper,
                 devices,
-                seed,
+                seeds,
             ),
         }
+    }
+
+    /// One run's batch on the view.
+    fn batch(&self, batch: &Transitions) -> SacBatch {
+        let plain = &self.learner.devices.plain;
+        let (input, next_input) = self.view.of_batch(batch, &self.spec);
+        let (input, next_input) = (
+            rows(input, batch.len(), plain),
+            rows(next_input, batch.len(), plain),
+        );
+        let tensors = TransitionTensors::new(batch, plain);
+        SacBatch::new(
+            &tensors,
+            (input.clone(), next_input.clone()),
+            (input, next_input),
+        )
     }
 }
 
 impl Agent for SacAgent {
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let view = match self.view {
-            // At Δ = 0 the first obs_dim entries of x_t are s_t.
-            InputView::TrueState => InputView::LastObservation,
-            view => view,
-        };
-        let inputs = view.from_augmented(augmented, rows, &self.spec);
-        self.learner
-            .act(&inputs, rows, view.width(&self.spec), mode)
+        self.act_run(0, augmented, rows, mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {
@@ -521,7 +640,7 @@ impl Agent for SacAgent {
         };
         ActingNetwork::Policy {
             input,
-            policy: self.learner.actor.weights(),
+            policy: self.learner.actor.weights(0),
         }
     }
 
@@ -530,27 +649,49 @@ impl Agent for SacAgent {
     }
 
     fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        let batch = &ctx.batch()?;
-        let plain = self.learner.devices.plain.clone();
-        let (input, next_input) = self.view.of_batch(batch, &self.spec);
-        let (input, next_input) = (
-            rows(input, batch.len(), &plain),
-            rows(next_input, batch.len(), &plain),
-        );
-        let tensors = TransitionTensors::new(batch, &plain);
-        let stats = self.learner.update(&SacBatch::new(
-            &tensors,
-            (input.clone(), next_input.clone()),
-            (input, next_input),
-        ));
-        Ok(stats.named())
+        Ok(self.update_runs(std::slice::from_mut(ctx))?.remove(0))
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.learner.save(dir, "")
+        self.save_runs(&[dir])
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.learner.load(dir, "")
+        self.load_runs(&[dir])
+    }
+
+    fn runs(&self) -> usize {
+        self.learner.runs()
+    }
+
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+        let view = match self.view {
+            // At Δ = 0 the first obs_dim entries of x_t are s_t.
+            InputView::TrueState => InputView::LastObservation,
+            view => view,
+        };
+        let inputs = view.from_augmented(augmented, rows, &self.spec);
+        self.learner
+            .act_run(run, &inputs, rows, view.width(&self.spec), mode)
+    }
+
+    fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<Vec<Stats>, ReplayError> {
+        let batches = contexts
+            .iter_mut()
+            .map(|ctx| Ok(self.batch(&ctx.batch()?)))
+            .collect::<Result<Vec<_>, ReplayError>>()?;
+        let stats = self.learner.update(&SacBatch::stack(batches));
+        Ok(stats.iter().map(SacStats::named).collect())
+    }
+
+    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.learner.save(dirs, "")
+    }
+
+    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.learner.load(dirs, "")
     }
 }

@@ -74,6 +74,16 @@ impl AlgoSettings {
         self.config.build(spec, devices, seed)
     }
 
+    /// The runs of `seeds` as one agent (a stack).
+    pub fn build_stack(
+        &self,
+        spec: &AgentSpec,
+        devices: &Devices,
+        seeds: &[u64],
+    ) -> Box<dyn Agent> {
+        self.config.build_stack(spec, devices, seeds)
+    }
+
     /// `--help-config`: every field with its default and its doc.
     pub fn describe(&self) -> String {
         let info = self.info();

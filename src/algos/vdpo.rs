@@ -52,7 +52,8 @@ use crate::acting::{ActingNetwork, BeliefTransformer, TransformerBlock};
 use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, TransitionTensors,
-    adam, dense, materialize, matrix, norm, rows, to_vec,
+    adam, dense, load_optimizer_stack, load_stack, materialize, matrix, norm, one_run, rows,
+    to_vec,
 };
 use crate::seeds;
 
@@ -497,8 +498,8 @@ impl Vdpo {
 
     /// One update of the reference SAC on the true `(s, a, r, s')`; returns its statistics.
     fn update_reference(&mut self, batch: &SacBatch, updates_before: u64) -> Stats {
-        let alpha = self.reference.temperature.alpha();
-        let critic_loss = self.reference.update_critics(batch);
+        let alpha = self.reference.temperature.alphas()[0];
+        let critic_loss = self.reference.update_critics(batch)[0];
         let mut stats: Stats = vec![
             (REFERENCE_STATS[0], critic_loss),
             (REFERENCE_STATS[2], alpha),
@@ -510,7 +511,7 @@ impl Vdpo {
                 actor_loss += self
                     .reference
                     .update_actor_and_temperature(batch, distribution, None)
-                    .0;
+                    .0[0];
             }
             stats.push((REFERENCE_STATS[1], actor_loss / self.actor_every as f64));
         }
@@ -557,8 +558,8 @@ impl Vdpo {
             let features = features.reshape([n * delay, width]);
             let targets = matrix(batch.intermediate_states, n * delay, obs, &plain);
             let loss = gaussian_kl(
-                self.policy_head.distribution(features),
-                reference.distribution(targets),
+                one_run(self.policy_head.distribution(features.unsqueeze_dim(0))),
+                one_run(reference.distribution(targets.unsqueeze_dim(0))),
             );
             kl_sum += f64::from(loss.clone().inner().into_scalar::<f32>());
             let grads = GradientsParams::from_grads(loss.backward(), &self.policy_head);
@@ -588,23 +589,24 @@ impl Agent for Vdpo {
                     .schedule
                     .noise
                     .normal(rows, self.spec.act_dim, &self.devices.plain);
-                head.sample(h, eps, &self.scale).action
+                head.sample(h.unsqueeze_dim(0), eps.unsqueeze_dim(0), &self.scale)
+                    .action
             }
-            ActMode::Deterministic => head.mode(h, &self.scale),
+            ActMode::Deterministic => head.mode(h.unsqueeze_dim(0), &self.scale),
         })
     }
 
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::Belief {
             belief: self.belief.weights(),
-            policy: self.policy_head.weights(),
+            policy: self.policy_head.weights(0),
         }
     }
 
     fn act_delay_free(&mut self, states: &[f32], rows: usize) -> Option<Vec<f32>> {
         Some(
             self.reference
-                .act(states, rows, self.spec.obs_dim, ActMode::Deterministic),
+                .act_run(0, states, rows, self.spec.obs_dim, ActMode::Deterministic),
         )
     }
 
@@ -658,23 +660,26 @@ impl Agent for Vdpo {
     }
 
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.reference.save(dir, "reference_")?;
+        self.reference.save(&[dir], "reference_")?;
         let files = CheckpointDir::new(dir);
         files.save_module("belief.bpk", &self.belief)?;
-        files.save_module("policy_head.bpk", &self.policy_head)?;
+        files.save_slice("policy_head.bpk", &self.policy_head, 0)?;
         files.save_optimizer("belief_adam.bpk", &self.belief_opt)?;
-        files.save_optimizer("policy_head_adam.bpk", &self.policy_head_opt)?;
+        files.save_optimizer_slice("policy_head_adam.bpk", &self.policy_head_opt, 0)?;
         files.save_json("vdpo.json", &self.schedule)
     }
 
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.reference.load(dir, "reference_")?;
+        self.reference.load(&[dir], "reference_")?;
         let files = CheckpointDir::new(dir);
         self.belief = files.load_module("belief.bpk", self.belief.clone())?;
-        self.policy_head = files.load_module("policy_head.bpk", self.policy_head.clone())?;
+        self.policy_head = load_stack(&[files], "policy_head.bpk", self.policy_head.clone())?;
         self.belief_opt = files.load_optimizer("belief_adam.bpk", self.belief_opt.clone())?;
-        self.policy_head_opt =
-            files.load_optimizer("policy_head_adam.bpk", self.policy_head_opt.clone())?;
+        self.policy_head_opt = load_optimizer_stack(
+            &[files],
+            "policy_head_adam.bpk",
+            self.policy_head_opt.clone(),
+        )?;
         self.schedule = files.load_json("vdpo.json")?;
         Ok(())
     }
@@ -806,8 +811,19 @@ mod tests {
             &plain,
         );
         let (head, reference) = (
-            agent.policy_head.valid().distribution(features),
-            agent.reference.actor.valid().distribution(targets),
+            one_run(
+                agent
+                    .policy_head
+                    .valid()
+                    .distribution(features.unsqueeze_dim(0)),
+            ),
+            one_run(
+                agent
+                    .reference
+                    .actor
+                    .valid()
+                    .distribution(targets.unsqueeze_dim(0)),
+            ),
         );
         let forward = f64::from(to_vec(gaussian_kl(head.clone(), reference.clone()))[0]);
         let backward = f64::from(to_vec(gaussian_kl(reference, head))[0]);

@@ -1,5 +1,5 @@
 //! `dhrl train`: its arguments and their rules live in the library (`dhrl::train::TrainArgs`).
-use dhrl::train::{TrainArgs, train};
+use dhrl::train::{TrainArgs, TrainSummary, train, train_seeds};
 
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     if args.help_config {
@@ -8,15 +8,42 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     }
     let plan = args.plan()?;
     dhrl::train::stop_on_signals()?;
-    eprintln!("run folder: {}", plan.run.display());
-    let summary = train(
-        &plan.config,
-        &plan.run,
-        plan.start,
-        std::io::IsTerminal::is_terminal(&std::io::stderr()),
-    )?;
+    let progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let Some(seeds) = &plan.seeds else {
+        eprintln!("run folder: {}", plan.run.display());
+        let summary = train(&plan.config, &plan.run, plan.start, progress)?;
+        println!("{}", describe(&summary));
+        return Ok(());
+    };
+    eprintln!(
+        "stack of {} runs (seeds {seeds:?}) in {}",
+        seeds.len(),
+        plan.run.display()
+    );
+    let results = train_seeds(&plan.config, &plan.run, seeds, plan.start, progress)?;
+    let mut failed = Vec::new();
+    for (run, result) in &results {
+        match result {
+            Ok(summary) => println!("{}: {}", run.display(), describe(summary)),
+            Err(e) => {
+                println!("{}: failed: {e}", run.display());
+                failed.push(run.display().to_string());
+            }
+        }
+    }
+    match (failed.len(), results.len()) {
+        (0, _) => Ok(()),
+        (n, total) if n == total => anyhow::bail!("all {n} runs failed ({})", failed.join(", ")),
+        (n, total) => anyhow::bail!(
+            "{n} of {total} runs failed ({}); the others finished",
+            failed.join(", ")
+        ),
+    }
+}
+
+fn describe(summary: &TrainSummary) -> String {
     match summary.last_eval {
-        Some(e) => println!(
+        Some(e) => format!(
             "{} env steps, {} updates in {:.0} s; last evaluation: return {:.1} ± {:.1} over {} episodes (mean length {:.0})",
             summary.env_steps,
             summary.updates,
@@ -26,10 +53,9 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             e.episodes,
             e.length_mean
         ),
-        None => println!(
+        None => format!(
             "{} env steps, {} updates in {:.0} s",
             summary.env_steps, summary.updates, summary.wall_seconds
         ),
     }
-    Ok(())
 }

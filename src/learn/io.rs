@@ -51,6 +51,37 @@ impl<'a> CheckpointDir<'a> {
             .map_err(|e| load_error(&path, e))
     }
 
+    /// Writes slice `slice` of a stacked module as `name`, in the solo shapes
+    /// ([`super::slice_pack`]): what a solo run of that slice would write.
+    pub fn save_slice<M: Module>(
+        &self,
+        name: &str,
+        module: &M,
+        slice: usize,
+    ) -> Result<(), LearnError> {
+        let path = self.path(name);
+        let bytes = module
+            .clone()
+            .into_record()
+            .into_bytes()
+            .map_err(|e| save_error(&path, e))?;
+        let bytes = super::slice_pack(bytes, slice).map_err(|e| save_error(&path, e))?;
+        std::fs::write(&path, &*bytes).map_err(|e| save_error(&path, e))
+    }
+
+    /// Writes slice `slice` of a stacked module's optimiser state as `name`, in the solo shapes.
+    pub fn save_optimizer_slice(
+        &self,
+        name: &str,
+        optimizer: &ModuleOptimizer,
+        slice: usize,
+    ) -> Result<(), LearnError> {
+        let path = self.path(name);
+        let bytes = optimizer.into_bytes().map_err(|e| save_error(&path, e))?;
+        let bytes = super::slice_pack(bytes, slice).map_err(|e| save_error(&path, e))?;
+        std::fs::write(&path, &*bytes).map_err(|e| save_error(&path, e))
+    }
+
     /// Writes an optimiser's state (Adam's moments and step counts) as `name`.
     pub fn save_optimizer(
         &self,
@@ -86,6 +117,49 @@ impl<'a> CheckpointDir<'a> {
         let bytes = std::fs::read(&path).map_err(|e| load_error(&path, e))?;
         serde_json::from_slice(&bytes).map_err(|e| load_error(&path, e))
     }
+}
+
+/// A stacked module with its slice `i` read from `slices[i]`'s `name` (as
+/// [`CheckpointDir::save_slice`] wrote it, or a solo run's record of the same network).
+pub fn load_stack<M: Module>(
+    slices: &[CheckpointDir<'_>],
+    name: &str,
+    module: M,
+) -> Result<M, LearnError> {
+    let what = slices
+        .first()
+        .map_or_else(|| PathBuf::from(name), |dir| dir.path(name));
+    let record = stacked_bytes(slices, name)
+        .and_then(|bytes| ModuleRecord::from_bytes(bytes).map_err(|e| load_error(&what, e)))?;
+    module
+        .try_load_record(record)
+        .map_err(|e| load_error(&what, e))
+}
+
+/// A stacked module's optimiser with its slice `i`'s state read from `slices[i]`'s `name`.
+pub fn load_optimizer_stack(
+    slices: &[CheckpointDir<'_>],
+    name: &str,
+    optimizer: ModuleOptimizer,
+) -> Result<ModuleOptimizer, LearnError> {
+    let what = slices
+        .first()
+        .map_or_else(|| PathBuf::from(name), |dir| dir.path(name));
+    optimizer
+        .from_bytes(stacked_bytes(slices, name)?)
+        .map_err(|e| load_error(&what, e))
+}
+
+/// The slices' records of `name`, read whole and stacked.
+fn stacked_bytes(slices: &[CheckpointDir<'_>], name: &str) -> Result<Bytes, LearnError> {
+    let parts = slices
+        .iter()
+        .map(|dir| read_whole(&dir.path(name)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let what = slices
+        .first()
+        .map_or_else(|| PathBuf::from(name), |dir| dir.path(name));
+    super::stack_packs(parts).map_err(|e| load_error(&what, e))
 }
 
 fn save_error(what: &Path, e: impl std::fmt::Display) -> LearnError {

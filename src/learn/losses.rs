@@ -9,56 +9,70 @@ const HALF_LN_TWO_PI: f64 = 0.918_938_533_204_672_7;
 
 /// Log-density of `a = scale·tanh(u)`, `u = μ + σ·ε ~ N(μ, σ²)` (Eq. 26 of Haarnoja et al.):
 /// `Σ_j [log N(u_j; μ_j, σ_j) − log(1 − tanh²(u_j))] − Σ_j ln scale_j`, with the stable form
-/// `log(1 − tanh² u) = 2(ln 2 − u − softplus(−2u))`. `[B, A]` inputs, `[B, 1]` result.
-pub fn squashed_gaussian_log_prob(
-    u: Tensor<2>,
-    eps: Tensor<2>,
-    log_std: Tensor<2>,
+/// `log(1 − tanh² u) = 2(ln 2 − u − softplus(−2u))`. Inputs `[…, A]` (a stack's `[S, B, A]`),
+/// the result `[…, 1]`.
+pub fn squashed_gaussian_log_prob<const D: usize>(
+    u: Tensor<D>,
+    eps: Tensor<D>,
+    log_std: Tensor<D>,
     log_scale_sum: f64,
-) -> Tensor<2> {
+) -> Tensor<D> {
     let gaussian = eps.square().mul_scalar(-0.5) - log_std - HALF_LN_TWO_PI;
     let log_det_tanh = (u.clone().neg() - softplus(u.mul_scalar(-2.0), 1.0))
         .add_scalar(std::f64::consts::LN_2)
         .mul_scalar(2.0);
     (gaussian - log_det_tanh)
-        .sum_dim(1)
+        .sum_dim(D - 1)
         .sub_scalar(log_scale_sum)
 }
 
 /// The soft Bellman target (Eq. 3, with the twin-critic minimum):
-/// `y = r + γ·(1 − done)·(min_j Q̄_j(s', a') − α·log π(a'|s'))`, `[B, 1]`.
+/// `y = r + γ·(1 − done)·(min_j Q̄_j(s', a') − α·log π(a'|s'))`, `[S, B, 1]`, with each run's
+/// `α` (`[S, 1, 1]`).
 pub fn critic_target(
-    reward: Tensor<2>,
-    done: Tensor<2>,
-    next_q_min: Tensor<2>,
-    next_log_prob: Tensor<2>,
-    alpha: f64,
+    reward: Tensor<3>,
+    done: Tensor<3>,
+    next_q_min: Tensor<3>,
+    next_log_prob: Tensor<3>,
+    alpha: Tensor<3>,
     gamma: f64,
-) -> Tensor<2> {
-    let soft_value = next_q_min - next_log_prob.mul_scalar(alpha);
+) -> Tensor<3> {
+    let soft_value = next_q_min - next_log_prob * alpha;
     reward + done.neg().add_scalar(1.0) * soft_value.mul_scalar(gamma)
 }
 
-/// `J_Q = E[(Q_1(s, a) − y)²] + E[(Q_2(s, a) − y)²]` (Eq. 5, both critics).
-pub fn critic_loss(q1: Tensor<2>, q2: Tensor<2>, target: Tensor<2>) -> Tensor<1> {
-    (q1 - target.clone()).square().mean() + (q2 - target).square().mean()
+/// Each run's mean over its batch: `[S, B, 1]` → `[S]`. Reduced along the last axis of
+/// `[S, B]`, which burn's CPU backend sums with the kernel of a whole-tensor `mean`: a run's
+/// mean is the solo `[B, 1]` mean to the last bit (a middle-axis reduction rounds otherwise).
+pub fn batch_mean(x: Tensor<3>) -> Tensor<1> {
+    let [runs, rows, _] = x.dims();
+    x.reshape([runs, rows]).mean_dim(1).reshape([runs])
 }
 
-/// `J_π = E[α·log π(a|s) − min_j Q_j(s, a)]`, `a ~ π(·|s)` (Eq. 7).
-pub fn actor_loss(log_prob: Tensor<2>, q_min: Tensor<2>, alpha: f64) -> Tensor<1> {
-    (log_prob.mul_scalar(alpha) - q_min).mean()
+/// `J_Q = E[(Q_1(s, a) − y)²] + E[(Q_2(s, a) − y)²]` (Eq. 5, both critics), per run `[S]`.
+pub fn critic_loss(q1: Tensor<3>, q2: Tensor<3>, target: Tensor<3>) -> Tensor<1> {
+    batch_mean((q1 - target.clone()).square()) + batch_mean((q2 - target).square())
+}
+
+/// `J_π = E[α·log π(a|s) − min_j Q_j(s, a)]`, `a ~ π(·|s)` (Eq. 7), per run `[S]`.
+pub fn actor_loss(log_prob: Tensor<3>, q_min: Tensor<3>, alpha: Tensor<3>) -> Tensor<1> {
+    batch_mean(log_prob * alpha - q_min)
 }
 
 /// `J(α) = E[−α·(log π(a|s) + H̄)]` with `α = exp(log α)` and the log-probabilities held
-/// fixed (Eq. 18); `mean_log_prob` is their batch mean.
+/// fixed (Eq. 18), per run `[S]`: `log_alpha` `[S, 1]`, `mean_log_prob` each run's batch mean.
 pub fn temperature_loss(
-    log_alpha: Tensor<1>,
-    mean_log_prob: f64,
+    log_alpha: Tensor<2>,
+    mean_log_prob: &[f64],
     target_entropy: f64,
 ) -> Tensor<1> {
-    log_alpha
-        .exp()
-        .mul_scalar(-(mean_log_prob + target_entropy))
+    let coefficients: Vec<f32> = mean_log_prob
+        .iter()
+        .map(|m| -(m + target_entropy) as f32)
+        .collect();
+    let rows = coefficients.len();
+    let coefficients = super::tensors::matrix(coefficients, rows, 1, &log_alpha.device());
+    (log_alpha.exp() * coefficients).reshape([-1])
 }
 
 /// Polyak averaging `θ̄ ← τ·θ + (1 − τ)·θ̄` of every parameter of `target` toward `online`.

@@ -1,28 +1,31 @@
 //! The pieces every learner is built from, in burn 0.22: devices, networks, the SAC losses
 //! (each a small function tested against hand-computed values), Polyak averaging and
-//! host-side noise so that runs are reproducible and resumable.
+//! host-side noise so that runs are reproducible and resumable. The SAC family's networks are
+//! stacked ([`stack`]): one set of tensors serves S runs.
 
 mod device;
 mod io;
 mod losses;
 mod nets;
 mod noise;
+mod stack;
 mod tensors;
 
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
 pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};
-pub use io::CheckpointDir;
+pub use io::{CheckpointDir, load_optimizer_stack, load_stack};
 pub use losses::{
-    actor_loss, critic_loss, critic_target, lifting_loss, polyak, squashed_gaussian_log_prob,
-    temperature_loss,
+    actor_loss, batch_mean, critic_loss, critic_target, lifting_loss, polyak,
+    squashed_gaussian_log_prob, temperature_loss,
 };
 pub use nets::{
     ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, Mlp, MlpConfig, PolicySample,
-    QNetwork, Temperature, TwinQ, adam, dense, materialize, norm, squashed_sample,
+    QNetwork, Temperature, TwinQ, adam, dense, materialize, norm, one_run, squashed_sample,
     squashed_samples_k,
 };
 pub use noise::Noise;
+pub use stack::{StackedLinear, slice, slice_pack, stack, stack_packs};
 #[cfg(test)]
 pub(crate) use tensors::assert_close;
 pub use tensors::{TransitionTensors, column, matrix, rows, to_vec};

@@ -7,6 +7,7 @@ use burn::prelude::*;
 use burn::tensor::activation::{relu, sigmoid};
 
 use super::losses::squashed_gaussian_log_prob;
+use super::stack::StackedLinear;
 use super::tensors::{matrix, to_vec};
 use crate::acting::{Dense, GaussianPolicyWeights, Norm};
 
@@ -19,19 +20,19 @@ pub const LOG_STD_MAX: f64 = 2.0;
 /// Two hidden ReLU layers.
 #[derive(Module, Debug)]
 struct Trunk {
-    l1: Linear,
-    l2: Linear,
+    l1: StackedLinear,
+    l2: StackedLinear,
 }
 
 impl Trunk {
     fn new(input: usize, device: &Device) -> Trunk {
         Trunk {
-            l1: LinearConfig::new(input, HIDDEN).init(device),
-            l2: LinearConfig::new(HIDDEN, HIDDEN).init(device),
+            l1: StackedLinear::new(input, HIDDEN, device),
+            l2: StackedLinear::new(HIDDEN, HIDDEN, device),
         }
     }
 
-    fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+    fn forward(&self, x: Tensor<3>) -> Tensor<3> {
         relu(self.l2.forward(relu(self.l1.forward(x))))
     }
 }
@@ -40,21 +41,22 @@ impl Trunk {
 #[derive(Module, Debug)]
 pub struct QNetwork {
     trunk: Trunk,
-    out: Linear,
+    out: StackedLinear,
 }
 
 impl QNetwork {
+    /// One run's critic (stack them with [`super::stack`]).
     pub fn new(input: usize, act_dim: usize, device: &Device) -> QNetwork {
         QNetwork {
             trunk: Trunk::new(input + act_dim, device),
-            out: LinearConfig::new(HIDDEN, 1).init(device),
+            out: StackedLinear::new(HIDDEN, 1, device),
         }
     }
 
-    /// `[B, 1]`
-    pub fn forward(&self, input: Tensor<2>, action: Tensor<2>) -> Tensor<2> {
+    /// `[S, B, 1]` from `[S, B, ·]` inputs and actions.
+    pub fn forward(&self, input: Tensor<3>, action: Tensor<3>) -> Tensor<3> {
         self.out
-            .forward(self.trunk.forward(Tensor::cat(vec![input, action], 1)))
+            .forward(self.trunk.forward(Tensor::cat(vec![input, action], 2)))
     }
 }
 
@@ -66,7 +68,7 @@ pub struct TwinQ {
 }
 
 impl TwinQ {
-    /// Two independently initialised critics.
+    /// Two independently initialised critics of one run.
     pub fn new(input: usize, act_dim: usize, device: &Device) -> TwinQ {
         TwinQ {
             q1: QNetwork::new(input, act_dim, device),
@@ -74,8 +76,8 @@ impl TwinQ {
         }
     }
 
-    /// `min(Q1, Q2)`, `[B, 1]`.
-    pub fn min(&self, input: Tensor<2>, action: Tensor<2>) -> Tensor<2> {
+    /// `min(Q1, Q2)`, `[S, B, 1]`.
+    pub fn min(&self, input: Tensor<3>, action: Tensor<3>) -> Tensor<3> {
         self.q1
             .forward(input.clone(), action.clone())
             .min_pair(self.q2.forward(input, action))
@@ -117,31 +119,32 @@ impl ActionScale {
 
 /// An action drawn from the policy with its log-density.
 pub struct PolicySample {
-    /// `[B, A]`, within the action bounds.
-    pub action: Tensor<2>,
-    /// `[B, 1]`
-    pub log_prob: Tensor<2>,
+    /// `[S, B, A]`, within the action bounds.
+    pub action: Tensor<3>,
+    /// `[S, B, 1]`
+    pub log_prob: Tensor<3>,
 }
 
 /// The tanh-squashed Gaussian policy `π(a|input)`.
 #[derive(Module, Debug)]
 pub struct GaussianPolicy {
     trunk: Trunk,
-    mean: Linear,
-    log_std: Linear,
+    mean: StackedLinear,
+    log_std: StackedLinear,
 }
 
 impl GaussianPolicy {
+    /// One run's policy (stack them with [`super::stack`]).
     pub fn new(input: usize, act_dim: usize, device: &Device) -> GaussianPolicy {
         GaussianPolicy {
             trunk: Trunk::new(input, device),
-            mean: LinearConfig::new(HIDDEN, act_dim).init(device),
-            log_std: LinearConfig::new(HIDDEN, act_dim).init(device),
+            mean: StackedLinear::new(HIDDEN, act_dim, device),
+            log_std: StackedLinear::new(HIDDEN, act_dim, device),
         }
     }
 
-    /// Mean and clamped log standard deviation of the Gaussian before squashing.
-    pub fn distribution(&self, input: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+    /// Mean and clamped log standard deviation of the Gaussian before squashing, `[S, B, A]`.
+    pub fn distribution(&self, input: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
         let h = self.trunk.forward(input);
         (
             self.mean.forward(h.clone()),
@@ -150,28 +153,22 @@ impl GaussianPolicy {
     }
 
     /// `a = scale·tanh(μ + σ·ε) + bias` with its log-density, reparameterised through `ε`.
-    pub fn sample(&self, input: Tensor<2>, eps: Tensor<2>, scale: &ActionScale) -> PolicySample {
+    pub fn sample(&self, input: Tensor<3>, eps: Tensor<3>, scale: &ActionScale) -> PolicySample {
         squashed_sample(self.distribution(input), eps, scale)
     }
 
-    /// `K` squashed actions per row, `[K, B, A]`, from `eps` `[K, B, A]`: the trunk runs once
-    /// per state, only the sampling is repeated.
-    pub fn sample_k(&self, input: Tensor<2>, eps: Tensor<3>, scale: &ActionScale) -> Tensor<3> {
-        squashed_samples_k(self.distribution(input), eps, scale)
-    }
-
-    /// The deterministic action `scale·tanh(μ) + bias` (evaluation).
-    pub fn mode(&self, input: Tensor<2>, scale: &ActionScale) -> Tensor<2> {
+    /// The deterministic action `scale·tanh(μ) + bias` (evaluation), `[S, B, A]`.
+    pub fn mode(&self, input: Tensor<3>, scale: &ActionScale) -> Tensor<3> {
         let (mean, _) = self.distribution(input);
-        mean.tanh() * scale.scale.clone() + scale.bias.clone()
+        mean.tanh() * scale.scale.clone().unsqueeze_dim(0) + scale.bias.clone().unsqueeze_dim(0)
     }
 
-    /// The weights as plain numbers (for export).
-    pub fn weights(&self) -> GaussianPolicyWeights {
+    /// Slice `slice`'s weights as plain numbers (for export).
+    pub fn weights(&self, slice: usize) -> GaussianPolicyWeights {
         GaussianPolicyWeights {
-            hidden: vec![dense(&self.trunk.l1), dense(&self.trunk.l2)],
-            mean: dense(&self.mean),
-            log_std: dense(&self.log_std),
+            hidden: vec![self.trunk.l1.dense(slice), self.trunk.l2.dense(slice)],
+            mean: self.mean.dense(slice),
+            log_std: self.log_std.dense(slice),
         }
     }
 }
@@ -205,19 +202,21 @@ pub fn norm(layer: &burn::nn::LayerNorm) -> Norm {
 /// [`GaussianPolicy::sample`] from a distribution already computed (so that two losses on
 /// the same states share one trunk pass).
 pub fn squashed_sample(
-    (mean, log_std): (Tensor<2>, Tensor<2>),
-    eps: Tensor<2>,
+    (mean, log_std): (Tensor<3>, Tensor<3>),
+    eps: Tensor<3>,
     scale: &ActionScale,
 ) -> PolicySample {
     let u = mean + log_std.clone().exp() * eps.clone();
     let log_prob = squashed_gaussian_log_prob(u.clone(), eps, log_std, scale.log_scale_sum);
     PolicySample {
-        action: u.tanh() * scale.scale.clone() + scale.bias.clone(),
+        action: u.tanh() * scale.scale.clone().unsqueeze_dim(0)
+            + scale.bias.clone().unsqueeze_dim(0),
         log_prob,
     }
 }
 
-/// [`GaussianPolicy::sample_k`] from a distribution already computed. The K samples lead
+/// `K` squashed actions per row from a distribution already computed (one run's `[B, A]`
+/// mean and log-std), `[K, B, A]`, from `eps` `[K, B, A]`. The K samples lead
 /// (`[K, B, A]`), so that broadcasting `μ`, `σ` over them and reducing over them walk
 /// contiguous `[B, A]` blocks.
 pub fn squashed_samples_k(
@@ -234,22 +233,36 @@ pub fn squashed_samples_k(
     squashed * scale.scale.clone().unsqueeze_dim(0) + scale.bias.clone().unsqueeze_dim(0)
 }
 
-/// The entropy temperature `α = exp(log α)`.
+/// A one-run stack's distribution `([1, B, A], [1, B, A])` as that run's `([B, A], [B, A])`.
+pub fn one_run((mean, log_std): (Tensor<3>, Tensor<3>)) -> (Tensor<2>, Tensor<2>) {
+    (mean.squeeze_dim(0), log_std.squeeze_dim(0))
+}
+
+/// The entropy temperature `α = exp(log α)`, one per run of a stack: `log α` is `[S, 1]`.
 #[derive(Module, Debug)]
 pub struct Temperature {
-    pub log_alpha: Param<Tensor<1>>,
+    pub log_alpha: Param<Tensor<2>>,
 }
 
 impl Temperature {
+    /// One run's temperature.
     pub fn new(initial_alpha: f64, device: &Device) -> Temperature {
         Temperature {
-            log_alpha: Param::from_data([initial_alpha.ln() as f32], device),
+            log_alpha: Param::from_data([[initial_alpha.ln() as f32]], device),
         }
     }
 
-    /// The current α as a number.
-    pub fn alpha(&self) -> f64 {
-        f64::from(self.log_alpha.val().inner().exp().into_scalar::<f32>())
+    /// `α` per run, `[S, 1, 1]`, off the graph.
+    pub fn alpha_tensor(&self) -> Tensor<3> {
+        self.log_alpha.val().inner().exp().unsqueeze_dim(2)
+    }
+
+    /// The current α of each run.
+    pub fn alphas(&self) -> Vec<f64> {
+        to_vec(self.log_alpha.val().inner().exp())
+            .into_iter()
+            .map(f64::from)
+            .collect()
     }
 }
 

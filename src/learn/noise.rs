@@ -36,11 +36,33 @@ impl Noise {
         self.rng.random_range(0..n)
     }
 
+    /// `n` independent N(0, 1) draws.
+    pub fn normal_values(&mut self, n: usize) -> Vec<f32> {
+        (0..n)
+            .map(|_| StandardNormal.sample(&mut self.rng))
+            .collect()
+    }
+
     /// A `[rows, cols]` tensor of independent N(0, 1) draws.
     pub fn normal(&mut self, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
-        let values = (0..rows * cols)
-            .map(|_| StandardNormal.sample(&mut self.rng))
+        matrix(self.normal_values(rows * cols), rows, cols, device)
+    }
+
+    /// A `[S, rows, cols]` tensor: slice `i` is `[rows, cols]` draws from `streams[i]` (each run
+    /// of a stack draws from its own stream what it would draw alone).
+    pub fn stacked_normal(
+        streams: &mut [Noise],
+        rows: usize,
+        cols: usize,
+        device: &Device,
+    ) -> Tensor<3> {
+        let values: Vec<f32> = streams
+            .iter_mut()
+            .flat_map(|stream| stream.normal_values(rows * cols))
             .collect();
-        matrix(values, rows, cols, device)
+        Tensor::from_data(
+            burn::prelude::TensorData::new(values, [streams.len(), rows, cols]),
+            device,
+        )
     }
 }

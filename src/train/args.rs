@@ -39,6 +39,11 @@ pub struct TrainArgs {
     /// their random streams from it.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Train several seeds as one stack, one learner pass serving them all: a list (0,1,2) or
+    /// a range (0..8, end excluded). Each seed gets an ordinary run folder, OUT/seed-<seed>
+    /// (OUT/stack.toml lists them); `--resume OUT` continues the stack.
+    #[arg(long, value_name = "SEEDS", conflicts_with = "seed", value_parser = parse_seeds)]
+    pub seeds: Option<Seeds>,
     /// Copies collecting in parallel (1: the paper's protocol, one update per step).
     #[arg(long)]
     pub envs: Option<usize>,
@@ -93,10 +98,45 @@ pub struct TrainArgs {
     pub resume: Option<PathBuf>,
 }
 
-/// A run to start or continue.
+/// `--seeds`' list, in order, each seed once.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Seeds(pub Vec<u64>);
+
+/// `0,1,2` or `0..8` (end excluded).
+fn parse_seeds(text: &str) -> Result<Seeds, String> {
+    let bad = || {
+        format!("`{text}`: --seeds takes a list of seeds (0,1,2) or a range (0..8, end excluded)")
+    };
+    let seeds: Vec<u64> = match text.split_once("..") {
+        Some((start, end)) => {
+            let (start, end): (u64, u64) = (
+                start.trim().parse().map_err(|_| bad())?,
+                end.trim().parse().map_err(|_| bad())?,
+            );
+            (start..end).collect()
+        }
+        None => text
+            .split(',')
+            .map(|seed| seed.trim().parse().map_err(|_| bad()))
+            .collect::<Result<_, _>>()?,
+    };
+    if seeds.is_empty() {
+        return Err(format!("`{text}`: --seeds names no seed"));
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    if let Some(twice) = seeds.iter().find(|seed| !seen.insert(**seed)) {
+        return Err(format!("`{text}`: --seeds names seed {twice} twice"));
+    }
+    Ok(Seeds(seeds))
+}
+
+/// A run (or a stack of runs) to start or continue.
 #[derive(Debug, Clone)]
 pub struct TrainPlan {
+    /// The run folder, or the stack's folder.
     pub run: PathBuf,
+    /// A stack's seeds (`--seeds`, or the stack `--resume` names); `None` for one run.
+    pub seeds: Option<Vec<u64>>,
     pub start: Start,
     /// For [`Start::Resume`], only `steps` is used (the run's own config.toml holds the rest).
     pub config: TrainConfig,
@@ -170,6 +210,7 @@ impl TrainArgs {
             ("--actuator-noise", d.actuator_noise.is_some()),
             ("--warmup", d.warmup.is_some()),
             ("--seed", self.seed.is_some()),
+            ("--seeds", self.seeds.is_some()),
             ("--envs", self.envs.is_some()),
             ("--threads", self.threads.is_some()),
             ("--warmup-steps", self.warmup_steps.is_some()),
@@ -206,6 +247,7 @@ impl TrainArgs {
             }
             return Ok(TrainPlan {
                 run: dir.clone(),
+                seeds: super::stack_seeds(dir)?,
                 start: Start::Resume,
                 config: TrainConfig {
                     steps: self.steps.unwrap_or(0),
@@ -219,13 +261,18 @@ impl TrainArgs {
             let stamp = std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0, |d| d.as_secs());
+            let seeds = match &self.seeds {
+                Some(Seeds(seeds)) => format!("seeds{}-{}", seeds[0], seeds[seeds.len() - 1]),
+                None => format!("s{}", config.seed),
+            };
             PathBuf::from(format!(
-                "runs/{}-{}-d{delay}-s{}-{stamp}",
-                config.task, config.algo, config.seed
+                "runs/{}-{}-d{delay}-{seeds}-{stamp}",
+                config.task, config.algo
             ))
         });
         Ok(TrainPlan {
             run,
+            seeds: self.seeds.clone().map(|Seeds(seeds)| seeds),
             start: Start::Fresh,
             config,
         })

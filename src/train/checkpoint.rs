@@ -34,23 +34,51 @@ pub fn discard_partial(run: &Path) -> Result<(), TrainError> {
     Ok(())
 }
 
-/// Makes the partial checkpoint the current one.
-pub fn commit(run: &Path) -> Result<(), TrainError> {
-    let (partial, current, previous) =
-        (run.join(PARTIAL), run.join(CHECKPOINT), run.join(PREVIOUS));
-    sync_dir(&partial)?;
-    if current.exists() {
+/// Makes each run's partial checkpoint its current one. A stack's runs are committed
+/// together, in two passes: every run first swaps its new checkpoint in and keeps its previous
+/// one, and only then are the previous ones removed. A crash in the first pass leaves each run
+/// holding the step before (current or previous), which [`available`] finds, so that a stack
+/// resumes from one step.
+pub fn commit_all(runs: &[&Path]) -> Result<(), TrainError> {
+    for run in runs {
+        let (partial, current, previous) =
+            (run.join(PARTIAL), run.join(CHECKPOINT), run.join(PREVIOUS));
+        sync_dir(&partial)?;
+        if current.exists() {
+            if previous.exists() {
+                std::fs::remove_dir_all(&previous).map_err(io_error(&previous))?;
+            }
+            std::fs::rename(&current, &previous).map_err(io_error(&current))?;
+        }
+        std::fs::rename(&partial, &current).map_err(io_error(&partial))?;
+        sync_dir(run)?;
+    }
+    for run in runs {
+        let previous = run.join(PREVIOUS);
         if previous.exists() {
             std::fs::remove_dir_all(&previous).map_err(io_error(&previous))?;
         }
-        std::fs::rename(&current, &previous).map_err(io_error(&current))?;
-    }
-    std::fs::rename(&partial, &current).map_err(io_error(&partial))?;
-    sync_dir(run)?;
-    if previous.exists() {
-        std::fs::remove_dir_all(&previous).map_err(io_error(&previous))?;
     }
     Ok(())
+}
+
+/// Every whole checkpoint `run` holds (the current one, and the previous one while a commit
+/// is under way), with its environment steps.
+pub fn available(run: &Path) -> Result<Vec<(u64, PathBuf)>, TrainError> {
+    let mut found = Vec::new();
+    for name in [CHECKPOINT, PREVIOUS] {
+        let dir = run.join(name);
+        let state = dir.join("state.json");
+        if state.is_file() {
+            let value: serde_json::Value = read_json(&state)?;
+            let steps = value["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
+                path: state.display().to_string(),
+                message: "no env_steps in the checkpoint's state".into(),
+            })?;
+            found.push((steps, dir));
+        }
+    }
+    Ok(found)
 }
 
 /// The checkpoint to resume from: the current one, or the previous one when a crash hit

@@ -11,8 +11,8 @@ use super::TrainError;
 /// Which of an agent's policies is evaluated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum EvalPolicy {
-    /// The policy that acts on `x_t` in the delayed task.
-    Regular,
+    /// The policy that acts on `x_t` in the delayed task (of run `run`, in a stack).
+    Regular { run: usize },
     /// A delay-free policy on the true state (D2HPG's abstract policy); run it with Δ = 0.
     DelayFree,
 }
@@ -62,7 +62,9 @@ pub fn evaluate(
             &mut actions,
             |i| !finished[i],
             |inputs, rows| match policy {
-                EvalPolicy::Regular => Ok(agent.act(inputs, rows, ActMode::Deterministic)),
+                EvalPolicy::Regular { run } => {
+                    Ok(agent.act_run(run, inputs, rows, ActMode::Deterministic))
+                }
                 EvalPolicy::DelayFree => agent.act_delay_free(inputs, rows).ok_or_else(|| {
                     TrainError::Config(super::ConfigError::no_delay_free_policy(
                         "the evaluated agent",

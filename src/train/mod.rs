@@ -22,7 +22,10 @@ pub use curves::{CurveSummary, EvalRow, curve_summary, read_evals, summarize_run
 pub use eval::{EvalResult, evaluate};
 #[cfg(feature = "cli")]
 pub use run::stop_on_signals;
-pub use run::{SavedRun, Start, TrainSummary, evaluate_saved, learner_pool, load_saved, train};
+pub use run::{
+    FAILED, STACK, SavedRun, Start, TrainSummary, evaluate_saved, learner_pool, load_saved,
+    stack_member, stack_seeds, train, train_seeds, train_stack,
+};
 
 use crate::delay::{DelayError, ReplayError};
 use crate::learn::LearnError;

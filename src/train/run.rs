@@ -86,15 +86,15 @@ const TRAIN_HEADER: [&str; 6] = [
     "diverged_episodes",
 ];
 
-struct Trainer {
+/// One run of a stack: its copies and delay layer, replay, counters, logs and folder.
+struct RunSlot {
     config: TrainConfig,
     run: PathBuf,
+    /// Held while the run trains: a second `dhrl train` on the folder is refused.
+    _lock: std::fs::File,
     /// The training copies and their delay layer.
     batch: DelayedBatch,
     replay: ReplayStore,
-    agent: Box<dyn Agent>,
-    /// The threads the agent's learners run on (its declared learner count).
-    learner_pool: rayon::ThreadPool,
     state: LoopState,
     /// Opened when the loop starts, after a resume has cut the files back.
     evals: Option<CsvLog>,
@@ -103,7 +103,20 @@ struct Trainer {
     events: Option<EventLog>,
     /// The checkpoint's step when the run was resumed.
     resumed_after: Option<u64>,
+    /// Why the run stopped while the rest of its stack went on: it then neither steps, logs
+    /// nor saves, and its folder keeps its last checkpoint.
+    failed: Option<TrainError>,
+}
+
+/// The loop over a stack of runs (one run: a solo run), their learners one agent.
+struct Trainer {
+    slots: Vec<RunSlot>,
+    agent: Box<dyn Agent>,
+    /// The threads the agent's learners run on (its declared learner count).
+    learner_pool: rayon::ThreadPool,
     stat_names: Vec<&'static str>,
+    /// What `dhrl train --resume` takes to continue: the run, or the stack's folder.
+    resume_target: PathBuf,
 }
 
 /// A pool of `threads` threads for the learners: burn's CPU backend splits the products of a
@@ -159,7 +172,40 @@ pub fn train(
     start: Start,
     progress: bool,
 ) -> Result<TrainSummary, TrainError> {
-    // Held until the run returns: a second `dhrl train` on the folder is refused.
+    let runs = [(config.clone(), run.to_path_buf())];
+    train_stack(&runs, run, start, progress)?.remove(0)
+}
+
+/// Trains the runs of one configuration, their seeds apart, as one stack: one learner pass
+/// serves all of them, and each writes its own ordinary run folder (as a solo run of its seed
+/// would, [`crate::learn::stack`]). With [`Start::Resume`] each continues from its folder
+/// (`config` gives only `steps`). `resume_target` is what a stop message tells to resume. A
+/// run that fails (a non-finite statistic) stops alone, with its error in its result and in
+/// its folder's `failed.txt`; the others go on.
+pub fn train_stack(
+    runs: &[(TrainConfig, PathBuf)],
+    resume_target: &Path,
+    start: Start,
+    progress: bool,
+) -> Result<Vec<Result<TrainSummary, TrainError>>, TrainError> {
+    let prepared = runs
+        .iter()
+        .map(|(config, run)| prepare(config, run, start))
+        .collect::<Result<Vec<_>, _>>()?;
+    same_but_seed(&prepared)?;
+    let mut trainer = Trainer::new(prepared, resume_target)?;
+    if start == Start::Resume {
+        trainer.resume()?;
+    }
+    trainer.run(progress)
+}
+
+/// A run's folder made (fresh) or its configuration read (resume), and its lock.
+fn prepare(
+    config: &TrainConfig,
+    run: &Path,
+    start: Start,
+) -> Result<(TrainConfig, PathBuf, std::fs::File), TrainError> {
     let lock;
     let config = match start {
         Start::Fresh => {
@@ -203,13 +249,32 @@ pub fn train(
             merged
         }
     };
-    let mut trainer = Trainer::new(config, run)?;
-    if start == Start::Resume {
-        trainer.resume()?;
+    Ok((config, run.to_path_buf(), lock))
+}
+
+/// Refuses a stack whose runs differ in more than their seeds (they share one schedule and
+/// one learner configuration).
+fn same_but_seed(runs: &[(TrainConfig, PathBuf, std::fs::File)]) -> Result<(), TrainError> {
+    let without_seed = |config: &TrainConfig| {
+        toml::to_string(&TrainConfig {
+            seed: 0,
+            ..config.clone()
+        })
+        .unwrap_or_default()
+    };
+    let first = without_seed(&runs[0].0);
+    match runs[1..].iter().find(|(c, _, _)| without_seed(c) != first) {
+        Some((_, run, _)) => Err(TrainError::Config(ConfigError::Invalid {
+            what: "a stack's runs",
+            accepted: "one configuration, their seeds apart",
+            value: format!(
+                "{} differs from {} in more than its seed",
+                run.display(),
+                runs[0].1.display()
+            ),
+        })),
+        None => Ok(()),
     }
-    let summary = trainer.run(progress);
-    drop(lock);
-    summary
 }
 
 /// The run folder's lock file, `RUN/.lock`, locked exclusively (the lock goes with the
@@ -232,9 +297,8 @@ fn lock_run(run: &Path) -> Result<std::fs::File, TrainError> {
     }
 }
 
-impl Trainer {
-    fn new(config: TrainConfig, run: &Path) -> Result<Trainer, TrainError> {
-        let delay = config.validate()?;
+impl RunSlot {
+    fn new(config: TrainConfig, run: PathBuf, lock: std::fs::File) -> Result<RunSlot, TrainError> {
         let batch = DelayedBatch::new(
             &BatchConfig {
                 task: config.task,
@@ -247,13 +311,7 @@ impl Trainer {
             config.delay_device,
             seeds::delay_layer(config.seed),
         )?;
-        let spec = AgentSpec::for_model(batch.env().model(), delay);
-        let layout = batch.layout();
-        let replay = ReplayStore::new(layout, config.replay_capacity)?;
-        let devices = Devices::new(config.device)?;
-        let agent = config.algo.build(&spec, &devices, config.seed);
-        let stat_names = agent.stat_names();
-        let learner_pool = learner_pool(config.algo.info().learner_threads)?;
+        let replay = ReplayStore::new(batch.layout(), config.replay_capacity)?;
         let state = LoopState {
             env_steps: 0,
             updates: 0,
@@ -264,42 +322,43 @@ impl Trainer {
             sample_rng: ChaCha8Rng::seed_from_u64(seeds::replay_sampling(config.seed)),
             warmup_rng: ChaCha8Rng::seed_from_u64(seeds::warmup_phase(config.seed)),
             last_eval: None,
-            stat_sums: vec![0.0; stat_names.len()],
-            stat_counts: vec![0; stat_names.len()],
+            stat_sums: Vec::new(),
+            stat_counts: Vec::new(),
             stat_count: 0,
             logged_steps: 0,
             logged_updates: 0,
             logged_wall: 0.0,
             diverged_episodes: 0,
         };
-        Ok(Trainer {
+        Ok(RunSlot {
             config,
-            run: run.to_path_buf(),
+            run,
+            _lock: lock,
             batch,
             replay,
-            learner_pool,
-            agent,
             state,
             evals: None,
             train_log: None,
             events: None,
             resumed_after: None,
-            stat_names,
+            failed: None,
         })
     }
 
-    /// Loads the latest checkpoint and cuts the logs back to it.
-    fn resume(&mut self) -> Result<(), TrainError> {
-        let dir = checkpoint::latest(&self.run)
-            .ok_or_else(|| TrainError::NoCheckpoint(self.run.display().to_string()))?;
+    fn active(&self) -> bool {
+        self.failed.is_none()
+    }
+
+    /// Loads the loop's state, the copies, delay layer and replay of the checkpoint `dir`, and
+    /// cuts the logs back to it.
+    fn resume_from(&mut self, dir: &Path, stat_names: usize) -> Result<(), TrainError> {
         self.state = read_json(&dir.join("state.json"))?;
         // Checkpoints written before per-statistic counts: every statistic on every update.
-        let n = self.stat_names.len();
-        if self.state.stat_counts.len() != n {
-            self.state.stat_counts = vec![self.state.stat_count; n];
+        if self.state.stat_counts.len() != stat_names {
+            self.state.stat_counts = vec![self.state.stat_count; stat_names];
         }
-        if self.state.stat_sums.len() != n {
-            self.state.stat_sums = vec![0.0; n];
+        if self.state.stat_sums.len() != stat_names {
+            self.state.stat_sums = vec![0.0; stat_names];
         }
         let env: BatchSnapshot = read_json(&dir.join("env.json"))?;
         self.batch.env_mut().restore(&env)?;
@@ -308,7 +367,6 @@ impl Trainer {
             .load(&mut checkpoint::open_binary(&dir.join("delay.bin"))?)?;
         self.replay
             .load(&mut checkpoint::open_binary(&dir.join("replay.bin"))?)?;
-        self.agent.load(&dir.join("agent"))?;
         truncate_after(&self.run.join("evals.csv"), self.state.env_steps)?;
         truncate_after(&self.run.join("train.csv"), self.state.env_steps)?;
         tensorboard::truncate_after(&self.run, self.state.env_steps)?;
@@ -316,31 +374,8 @@ impl Trainer {
         Ok(())
     }
 
-    /// Writes a checkpoint, or fails with [`TrainError::CheckpointFailed`] (a full disk, an
-    /// unwritable folder), the partial one removed and the previous one intact.
-    fn save_checkpoint(&mut self) -> Result<(), TrainError> {
-        self.write_checkpoint().map_err(|cause| {
-            let partial_removed = checkpoint::discard_partial(&self.run).is_ok();
-            let kept = match checkpoint::latest(&self.run) {
-                Some(previous) => {
-                    format!("the previous checkpoint {} is intact", previous.display())
-                }
-                None => "there is no earlier checkpoint".into(),
-            };
-            TrainError::CheckpointFailed {
-                run: self.run.display().to_string(),
-                env_steps: self.state.env_steps,
-                cause: Box::new(cause),
-                kept: if partial_removed {
-                    kept
-                } else {
-                    format!("{kept} (the partial one could not be removed either)")
-                },
-            }
-        })
-    }
-
-    fn write_checkpoint(&mut self) -> Result<(), TrainError> {
+    /// Writes the loop's part of a checkpoint into a new partial folder; returns it.
+    fn write_partial(&self) -> Result<PathBuf, TrainError> {
         let dir = checkpoint::begin(&self.run)?;
         write_json(&dir.join("state.json"), &self.state)?;
         write_json(&dir.join("env.json"), &self.batch.env().snapshot())?;
@@ -348,86 +383,34 @@ impl Trainer {
             Ok(self.batch.layer().save(out)?)
         })?;
         write_binary(&dir.join("replay.bin"), |out| Ok(self.replay.save(out)?))?;
-        self.agent.save(&dir.join("agent"))?;
-        checkpoint::commit(&self.run)
+        Ok(dir)
     }
 
-    /// Actions for every copy: uniform random during the warm-up phase, the policy's samples
-    /// for copies whose augmented state exists, the delay layer's warm-up actions for the rest.
-    fn choose_actions(&mut self) -> Result<Vec<f32>, TrainError> {
-        let env = self.batch.env();
-        let (n, act) = (env.len(), env.act_dim());
-        let mut actions = vec![0.0f32; n * act];
-        let warming_up = self.state.env_steps < self.config.warmup_steps;
-        if warming_up {
-            let (low, high) = env.action_bounds();
-            for row in actions.chunks_mut(act) {
-                for (j, a) in row.iter_mut().enumerate() {
-                    *a = self
-                        .state
-                        .warmup_rng
-                        .random_range(low[j] as f32..=high[j] as f32);
-                }
-            }
-        }
-        let (agent, pool) = (&mut self.agent, &self.learner_pool);
-        self.batch.choose_actions(
-            &mut actions,
-            |_| !warming_up,
-            |inputs, rows| {
-                Ok::<_, TrainError>(pool.install(|| agent.act(inputs, rows, ActMode::Explore)))
-            },
-        )?;
-        Ok(actions)
-    }
-
-    fn update(&mut self) -> Result<(), TrainError> {
-        let mut ctx = UpdateContext::replay(
-            &self.replay,
-            &mut self.state.sample_rng,
-            self.agent.batch_extras(),
-            self.config.batch_size,
-            self.state.env_steps,
-            self.state.updates,
-        );
-        let agent = &mut self.agent;
-        let stats = match self.learner_pool.install(|| agent.update(&mut ctx)) {
-            Ok(stats) => stats,
-            // Nothing complete yet (e.g. delay longer than the warm-up): learn later.
-            Err(ReplayError::Empty) => return Ok(()),
-            Err(e) => return Err(e.into()),
+    /// A failed checkpoint as [`TrainError::CheckpointFailed`], the partial one removed.
+    fn checkpoint_failed(&self, cause: TrainError) -> TrainError {
+        let partial_removed = checkpoint::discard_partial(&self.run).is_ok();
+        let kept = match checkpoint::latest(&self.run) {
+            Some(previous) => format!("the previous checkpoint {} is intact", previous.display()),
+            None => "there is no earlier checkpoint".into(),
         };
-        self.state.updates += 1;
-        if let Some((name, value)) = stats.iter().find(|(_, v)| !v.is_finite()) {
-            return Err(TrainError::NonFinite {
-                run: self.run.display().to_string(),
-                statistic: name,
-                value: *value,
-                update: self.state.updates,
-                env_steps: self.state.env_steps,
-            });
+        TrainError::CheckpointFailed {
+            run: self.run.display().to_string(),
+            env_steps: self.state.env_steps,
+            cause: Box::new(cause),
+            kept: if partial_removed {
+                kept
+            } else {
+                format!("{kept} (the partial one could not be removed either)")
+            },
         }
-        for (name, value) in stats {
-            let k = self
-                .stat_names
-                .iter()
-                .position(|n| *n == name)
-                .ok_or(TrainError::UndeclaredStatistic(name))?;
-            self.state.stat_sums[k] += value;
-            self.state.stat_counts[k] += 1;
-        }
-        if self.state.updates % self.config.log_every == 0 {
-            self.write_train_row()?;
-        }
-        Ok(())
     }
 
-    fn write_train_row(&mut self) -> Result<(), TrainError> {
+    fn write_train_row(&mut self, stat_names: &[&'static str]) -> Result<(), TrainError> {
         if self.train_log.is_none() {
             let header: Vec<&str> = TRAIN_HEADER
                 .iter()
                 .copied()
-                .chain(self.stat_names.iter().copied())
+                .chain(stat_names.iter().copied())
                 .collect();
             self.train_log = Some(CsvLog::open(self.run.join("train.csv"), &header)?);
         }
@@ -448,7 +431,7 @@ impl Trainer {
         s.stat_counts.iter_mut().for_each(|v| *v = 0);
         let scalars: Vec<(String, f64)> = TRAIN_HEADER
             .iter()
-            .chain(&self.stat_names)
+            .chain(stat_names)
             .zip(&row)
             .skip(1) // the step
             .filter_map(|(name, cell)| Some((format!("train/{name}"), cell.parse().ok()?)))
@@ -475,21 +458,7 @@ impl Trainer {
         events.scalars(self.state.env_steps, scalars)
     }
 
-    fn evaluate_now(&mut self) -> Result<EvalResult, TrainError> {
-        let seed = seeds::evaluation(self.config.seed, self.state.evals_done);
-        let (agent, config) = (&mut self.agent, &self.config);
-        let result = self.learner_pool.install(|| {
-            evaluate(
-                agent.as_mut(),
-                EvalPolicy::Regular,
-                config.task,
-                &config.delay,
-                config.delay_device,
-                config.eval_episodes,
-                config.threads,
-                seed,
-            )
-        })?;
+    fn record_eval(&mut self, result: EvalResult) -> Result<(), TrainError> {
         let evals = match &mut self.evals {
             Some(log) => log,
             None => self
@@ -510,77 +479,428 @@ impl Trainer {
             ("eval/length_mean".into(), result.length_mean),
         ])?;
         self.state.last_eval = Some(result);
+        Ok(())
+    }
+
+    /// Stops the run alone: its error goes to `RUN/failed.txt` and to its result.
+    fn fail(&mut self, error: TrainError) {
+        let path = self.run.join(FAILED);
+        let _ = crate::files::write_atomically(&path, format!("{error}\n"));
+        self.failed = Some(error);
+    }
+
+    fn summary(self) -> Result<TrainSummary, TrainError> {
+        match self.failed {
+            Some(error) => Err(error),
+            None => Ok(TrainSummary {
+                env_steps: self.state.env_steps,
+                updates: self.state.updates,
+                wall_seconds: self.state.wall_seconds,
+                last_eval: self.state.last_eval,
+            }),
+        }
+    }
+}
+
+/// A stack's folder: `stack.toml` (its seeds) and one ordinary run folder per seed.
+pub const STACK: &str = "stack.toml";
+
+/// The run folder of seed `seed` in the stack folder `dir`.
+pub fn stack_member(dir: &Path, seed: u64) -> PathBuf {
+    dir.join(format!("seed-{seed}"))
+}
+
+#[derive(Serialize, Deserialize)]
+struct StackFile {
+    seeds: Vec<u64>,
+}
+
+/// The seeds of the stack in `dir`, or `None` when `dir` holds no stack.
+pub fn stack_seeds(dir: &Path) -> Result<Option<Vec<u64>>, TrainError> {
+    let path = dir.join(STACK);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path).map_err(io_error(&path))?;
+    let file: StackFile = toml::from_str(&text).map_err(|e| TrainError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    Ok(Some(file.seeds))
+}
+
+/// `dhrl train --seeds`: the runs of `config` with each of `seeds`, trained as one stack in
+/// `dir` (fresh: `dir/stack.toml` and one run folder per seed, `dir/seed-<seed>`); with
+/// [`Start::Resume`], the stack in `dir` continues (`config` gives only `steps`), without the
+/// runs that failed before. Each run's result, with its folder.
+pub fn train_seeds(
+    config: &TrainConfig,
+    dir: &Path,
+    seeds: &[u64],
+    start: Start,
+    progress: bool,
+) -> Result<Vec<(PathBuf, Result<TrainSummary, TrainError>)>, TrainError> {
+    let seeds = match start {
+        Start::Fresh => {
+            if dir.exists() {
+                return Err(TrainError::OutputExists(dir.display().to_string()));
+            }
+            config.validate()?;
+            std::fs::create_dir_all(dir).map_err(io_error(dir))?;
+            let text = toml::to_string(&StackFile {
+                seeds: seeds.to_vec(),
+            })
+            .map_err(|e| TrainError::Io {
+                path: STACK.into(),
+                message: e.to_string(),
+            })?;
+            let path = dir.join(STACK);
+            crate::files::write_atomically(&path, text).map_err(io_error(&path))?;
+            seeds.to_vec()
+        }
+        Start::Resume => stack_seeds(dir)?
+            .ok_or_else(|| TrainError::NoCheckpoint(dir.display().to_string()))?
+            .into_iter()
+            .filter(|&seed| !stack_member(dir, seed).join(FAILED).is_file())
+            .collect(),
+    };
+    let runs: Vec<(TrainConfig, PathBuf)> = seeds
+        .iter()
+        .map(|&seed| {
+            (
+                TrainConfig {
+                    seed,
+                    ..config.clone()
+                },
+                stack_member(dir, seed),
+            )
+        })
+        .collect();
+    if runs.is_empty() {
+        return Err(TrainError::Io {
+            path: dir.display().to_string(),
+            message: format!("every run of the stack failed (each says why in its {FAILED})"),
+        });
+    }
+    let results = train_stack(&runs, dir, start, progress)?;
+    Ok(runs.into_iter().map(|(_, run)| run).zip(results).collect())
+}
+
+/// A run that stopped while the rest of its stack went on says why here.
+pub const FAILED: &str = "failed.txt";
+
+impl Trainer {
+    fn new(
+        runs: Vec<(TrainConfig, PathBuf, std::fs::File)>,
+        resume_target: &Path,
+    ) -> Result<Trainer, TrainError> {
+        let first = runs[0].0.clone();
+        let delay = first.validate()?;
+        let mut slots = runs
+            .into_iter()
+            .map(|(config, run, lock)| RunSlot::new(config, run, lock))
+            .collect::<Result<Vec<_>, _>>()?;
+        let spec = AgentSpec::for_model(slots[0].batch.env().model(), delay);
+        let devices = Devices::new(first.device)?;
+        let seeds: Vec<u64> = slots.iter().map(|slot| slot.config.seed).collect();
+        let agent = first.algo.build_stack(&spec, &devices, &seeds);
+        let stat_names = agent.stat_names();
+        for slot in &mut slots {
+            slot.state.stat_sums = vec![0.0; stat_names.len()];
+            slot.state.stat_counts = vec![0; stat_names.len()];
+        }
+        Ok(Trainer {
+            slots,
+            agent,
+            learner_pool: learner_pool(first.algo.info().learner_threads)?,
+            stat_names,
+            resume_target: resume_target.to_path_buf(),
+        })
+    }
+
+    /// Loads every run's checkpoint of one step: the latest all of them hold (a stack's
+    /// checkpoints are committed together, see [`checkpoint::commit_all`]), and cuts the logs
+    /// back to it.
+    fn resume(&mut self) -> Result<(), TrainError> {
+        let mut latest = Vec::with_capacity(self.slots.len());
+        for slot in &self.slots {
+            let steps = checkpoint::available(&slot.run)?;
+            let newest = steps
+                .iter()
+                .map(|(steps, _)| *steps)
+                .max()
+                .ok_or_else(|| TrainError::NoCheckpoint(slot.run.display().to_string()))?;
+            latest.push((newest, steps));
+        }
+        let common = latest.iter().map(|(newest, _)| *newest).min().unwrap_or(0);
+        let mut dirs = Vec::with_capacity(self.slots.len());
+        for (slot, (_, available)) in self.slots.iter_mut().zip(&latest) {
+            let dir = available
+                .iter()
+                .find(|(steps, _)| *steps == common)
+                .map(|(_, dir)| dir.clone())
+                .ok_or_else(|| TrainError::Io {
+                    path: slot.run.display().to_string(),
+                    message: format!(
+                        "holds no checkpoint of step {common}, where the rest of its stack is"
+                    ),
+                })?;
+            slot.resume_from(&dir, self.stat_names.len())?;
+            dirs.push(dir.join("agent"));
+        }
+        let dirs: Vec<&Path> = dirs.iter().map(PathBuf::as_path).collect();
+        self.agent.load_runs(&dirs)?;
+        Ok(())
+    }
+
+    /// Writes every active run's checkpoint and commits them together, or fails with
+    /// [`TrainError::CheckpointFailed`] (a full disk, an unwritable folder), the partial ones
+    /// removed and the previous ones intact.
+    fn save_checkpoint(&mut self) -> Result<(), TrainError> {
+        let mut partials = Vec::with_capacity(self.slots.len());
+        for slot in &self.slots {
+            partials.push(
+                slot.write_partial()
+                    .map_err(|e| slot.checkpoint_failed(e))?,
+            );
+        }
+        let agent_dirs: Vec<PathBuf> = partials.iter().map(|dir| dir.join("agent")).collect();
+        let agent_dirs: Vec<&Path> = agent_dirs.iter().map(PathBuf::as_path).collect();
+        if let Err(e) = self.agent.save_runs(&agent_dirs) {
+            return Err(self.slots[0].checkpoint_failed(e.into()));
+        }
+        let mut committed = Vec::new();
+        for slot in &self.slots {
+            if slot.active() {
+                committed.push(slot.run.as_path());
+            } else {
+                checkpoint::discard_partial(&slot.run)?;
+            }
+        }
+        checkpoint::commit_all(&committed)
+    }
+
+    /// Actions for every copy of run `i`: uniform random during the warm-up phase, the
+    /// policy's samples for copies whose augmented state exists, the delay layer's warm-up
+    /// actions for the rest.
+    fn choose_actions(&mut self, i: usize) -> Result<Vec<f32>, TrainError> {
+        let slot = &mut self.slots[i];
+        let env = slot.batch.env();
+        let (n, act) = (env.len(), env.act_dim());
+        let mut actions = vec![0.0f32; n * act];
+        let warming_up = slot.state.env_steps < slot.config.warmup_steps;
+        if warming_up {
+            let (low, high) = env.action_bounds();
+            for row in actions.chunks_mut(act) {
+                for (j, a) in row.iter_mut().enumerate() {
+                    *a = slot
+                        .state
+                        .warmup_rng
+                        .random_range(low[j] as f32..=high[j] as f32);
+                }
+            }
+        }
+        let (agent, pool) = (&mut self.agent, &self.learner_pool);
+        slot.batch.choose_actions(
+            &mut actions,
+            |_| !warming_up,
+            |inputs, rows| {
+                Ok::<_, TrainError>(
+                    pool.install(|| agent.act_run(i, inputs, rows, ActMode::Explore)),
+                )
+            },
+        )?;
+        Ok(actions)
+    }
+
+    /// One update of every run: each draws its batch from its own replay and stream.
+    fn update(&mut self) -> Result<(), TrainError> {
+        let extras = self.agent.batch_extras();
+        let mut contexts: Vec<UpdateContext<'_>> = self
+            .slots
+            .iter_mut()
+            .map(|slot| {
+                UpdateContext::replay(
+                    &slot.replay,
+                    &mut slot.state.sample_rng,
+                    extras,
+                    slot.config.batch_size,
+                    slot.state.env_steps,
+                    slot.state.updates,
+                )
+            })
+            .collect();
+        let agent = &mut self.agent;
+        let stats = match self
+            .learner_pool
+            .install(|| agent.update_runs(&mut contexts))
+        {
+            Ok(stats) => stats,
+            // Nothing complete yet (e.g. delay longer than the warm-up): learn later. A stack
+            // updates when every run has a complete transition.
+            Err(ReplayError::Empty) => return Ok(()),
+            Err(e) => return Err(e.into()),
+        };
+        drop(contexts);
+        let solo = self.slots.len() == 1;
+        for (slot, stats) in self.slots.iter_mut().zip(stats) {
+            if !slot.active() {
+                continue;
+            }
+            slot.state.updates += 1;
+            if let Some((name, value)) = stats.iter().find(|(_, v)| !v.is_finite()) {
+                let error = TrainError::NonFinite {
+                    run: slot.run.display().to_string(),
+                    statistic: name,
+                    value: *value,
+                    update: slot.state.updates,
+                    env_steps: slot.state.env_steps,
+                };
+                if solo {
+                    return Err(error);
+                }
+                eprintln!(
+                    "{}: stopped alone, the rest of its stack goes on: {error}",
+                    slot.run.display()
+                );
+                slot.fail(error);
+                continue;
+            }
+            for (name, value) in stats {
+                let k = self
+                    .stat_names
+                    .iter()
+                    .position(|n| *n == name)
+                    .ok_or(TrainError::UndeclaredStatistic(name))?;
+                slot.state.stat_sums[k] += value;
+                slot.state.stat_counts[k] += 1;
+            }
+            if slot.state.updates % slot.config.log_every == 0 {
+                slot.write_train_row(&self.stat_names)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn evaluate_now(&mut self, i: usize) -> Result<EvalResult, TrainError> {
+        let slot = &self.slots[i];
+        let seed = seeds::evaluation(slot.config.seed, slot.state.evals_done);
+        let (agent, config) = (&mut self.agent, &slot.config);
+        let result = self.learner_pool.install(|| {
+            evaluate(
+                agent.as_mut(),
+                EvalPolicy::Regular { run: i },
+                config.task,
+                &config.delay,
+                config.delay_device,
+                config.eval_episodes,
+                config.threads,
+                seed,
+            )
+        })?;
+        self.slots[i].record_eval(result)?;
         Ok(result)
     }
 
-    fn run(mut self, show_progress: bool) -> Result<TrainSummary, TrainError> {
-        let c = self.config.clone();
+    fn run(
+        mut self,
+        show_progress: bool,
+    ) -> Result<Vec<Result<TrainSummary, TrainError>>, TrainError> {
+        // The runs share one schedule: every counter below moves alike in each of them.
+        let c = self.slots[0].config.clone();
         let bar = Progress::new(
             c.steps,
             "{bar:30} {pos}/{len} steps  {per_sec}  ETA {eta}  {msg}",
             show_progress,
         );
-        bar.set_position(self.state.env_steps);
+        bar.set_position(self.slots[0].state.env_steps);
         let session_start = Instant::now();
-        let wall_at_start = self.state.wall_seconds;
-        while self.state.env_steps < c.steps {
-            let actions = self.choose_actions()?;
-            self.batch.step(&actions)?;
-            let count = self.replay.push_step(&self.batch)?;
-            if count > 0 {
-                self.state.diverged_episodes += count;
-                bar.suspend(|| {
-                    eprintln!(
-                        "warning: step {}: {count} training episode(s) ended because MuJoCo \
-                         found the simulation unstable (a bad qpos, qvel or qacc) and reset it; \
-                         the step is kept out of the replay ({} so far, in train.csv)",
-                        self.state.env_steps + c.envs as u64,
-                        self.state.diverged_episodes
-                    )
-                });
+        let walls_at_start: Vec<f64> = self.slots.iter().map(|s| s.state.wall_seconds).collect();
+        let set_walls = |slots: &mut [RunSlot]| {
+            let elapsed = session_start.elapsed().as_secs_f64();
+            for (slot, wall) in slots.iter_mut().zip(&walls_at_start) {
+                if slot.active() {
+                    slot.state.wall_seconds = wall + elapsed;
+                }
             }
-            self.state.env_steps += c.envs as u64;
-            bar.set_position(self.state.env_steps);
-            self.state.wall_seconds = wall_at_start + session_start.elapsed().as_secs_f64();
-            if self.state.env_steps >= c.warmup_steps {
-                self.state.update_debt += c.envs as f64 * c.updates_per_step;
-                while self.state.update_debt >= 1.0 {
-                    self.state.update_debt -= 1.0;
+        };
+        while self.slots[0].state.env_steps < c.steps && self.slots.iter().any(RunSlot::active) {
+            for i in 0..self.slots.len() {
+                if !self.slots[i].active() {
+                    continue;
+                }
+                let actions = self.choose_actions(i)?;
+                let slot = &mut self.slots[i];
+                slot.batch.step(&actions)?;
+                let count = slot.replay.push_step(&slot.batch)?;
+                if count > 0 {
+                    slot.state.diverged_episodes += count;
+                    bar.suspend(|| {
+                        eprintln!(
+                            "warning: {}: step {}: {count} training episode(s) ended because \
+                             MuJoCo found the simulation unstable (a bad qpos, qvel or qacc) and \
+                             reset it; the step is kept out of the replay ({} so far, in \
+                             train.csv)",
+                            slot.run.display(),
+                            slot.state.env_steps + c.envs as u64,
+                            slot.state.diverged_episodes
+                        )
+                    });
+                }
+            }
+            for slot in &mut self.slots {
+                slot.state.env_steps += c.envs as u64;
+            }
+            let env_steps = self.slots[0].state.env_steps;
+            bar.set_position(env_steps);
+            set_walls(&mut self.slots);
+            if env_steps >= c.warmup_steps {
+                for slot in &mut self.slots {
+                    slot.state.update_debt += c.envs as f64 * c.updates_per_step;
+                }
+                while self.slots[0].state.update_debt >= 1.0 {
+                    for slot in &mut self.slots {
+                        slot.state.update_debt -= 1.0;
+                    }
                     self.update()?;
                 }
             }
-            self.state.wall_seconds = wall_at_start + session_start.elapsed().as_secs_f64();
-            if self.state.env_steps / c.eval_every > self.state.evals_done
-                || self.state.env_steps >= c.steps
-            {
-                let result = self.evaluate_now()?;
-                self.state.evals_done = self.state.env_steps / c.eval_every;
-                bar.set_message(format!(
-                    "eval {:.1} ± {:.1}",
-                    result.return_mean, result.return_std
-                ));
+            set_walls(&mut self.slots);
+            if env_steps / c.eval_every > self.slots[0].state.evals_done || env_steps >= c.steps {
+                let mut message = Vec::new();
+                for i in 0..self.slots.len() {
+                    if !self.slots[i].active() {
+                        continue;
+                    }
+                    let result = self.evaluate_now(i)?;
+                    message.push(format!(
+                        "{:.1} ± {:.1}",
+                        result.return_mean, result.return_std
+                    ));
+                }
+                for slot in &mut self.slots {
+                    slot.state.evals_done = env_steps / c.eval_every;
+                }
+                bar.set_message(format!("eval {}", message.join(", ")));
             }
-            let finished = self.state.env_steps >= c.steps;
-            let scheduled = self.state.env_steps / c.checkpoint_every > self.state.checkpoints_done;
+            let finished = env_steps >= c.steps;
+            let scheduled = env_steps / c.checkpoint_every > self.slots[0].state.checkpoints_done;
             if scheduled || finished || stop_requested() {
-                self.state.checkpoints_done = self.state.env_steps / c.checkpoint_every;
+                for slot in &mut self.slots {
+                    slot.state.checkpoints_done = env_steps / c.checkpoint_every;
+                }
                 self.save_checkpoint()?;
             }
             if stop_requested() && !finished {
                 bar.abandon();
                 return Err(TrainError::Interrupted {
-                    run: self.run.display().to_string(),
-                    env_steps: self.state.env_steps,
+                    run: self.resume_target.display().to_string(),
+                    env_steps,
                 });
             }
         }
         bar.finish();
-        Ok(TrainSummary {
-            env_steps: self.state.env_steps,
-            updates: self.state.updates,
-            wall_seconds: self.state.wall_seconds,
-            last_eval: self.state.last_eval,
-        })
+        Ok(self.slots.into_iter().map(RunSlot::summary).collect())
     }
 }
 
@@ -714,7 +1034,7 @@ pub fn evaluate_saved(
     let policy = if delay_free_policy {
         EvalPolicy::DelayFree
     } else {
-        EvalPolicy::Regular
+        EvalPolicy::Regular { run: 0 }
     };
     learner_pool(info.learner_threads)?.install(|| {
         evaluate(
