@@ -94,11 +94,6 @@ fn stacked_layers_compute_each_runs_solo_values_and_gradients_bit_for_bit() {
     }
 }
 
-/// `[S, B, ·]` from one `[B, ·]` per run.
-fn stacked(parts: Vec<Tensor<2>>) -> Tensor<3> {
-    Tensor::stack(parts, 0)
-}
-
 /// Run `run`'s batch: SAC on the true state.
 fn solo_batch(spec: &AgentSpec, seed: u64, d: &Devices) -> SacBatch {
     let t = TransitionTensors::new(&random_batch(spec, 32, seed), &d.plain);
@@ -110,23 +105,7 @@ fn solo_batch(spec: &AgentSpec, seed: u64, d: &Devices) -> SacBatch {
 }
 
 fn stack_batches(batches: &[SacBatch]) -> SacBatch {
-    let field = |f: fn(&SacBatch) -> &Tensor<3>| {
-        stacked(
-            batches
-                .iter()
-                .map(|b| f(b).clone().squeeze_dim(0))
-                .collect(),
-        )
-    };
-    SacBatch {
-        actor_input: field(|b| &b.actor_input),
-        critic_input: field(|b| &b.critic_input),
-        action: field(|b| &b.action),
-        reward: field(|b| &b.reward),
-        next_actor_input: field(|b| &b.next_actor_input),
-        next_critic_input: field(|b| &b.next_critic_input),
-        done: field(|b| &b.done),
-    }
+    SacBatch::stack(batches.to_vec())
 }
 
 fn learner_parameters(learner: &SacLearner) -> Vec<Vec<f32>> {
@@ -336,16 +315,18 @@ fn dhrl_ok(args: &[&str]) {
 
 /// `dhrl train --seeds 0..3` writes one ordinary run folder per seed, each logging what the
 /// solo run of its seed logs (every column of train.csv and evals.csv but the wall-clock
-/// ones, to the last digit), for the SAC family and BPQL (stacked learners) and for D2HPG and
-/// delayed SAC (their runs side by side); the seeds' runs differ.
+/// ones, to the last digit), for the SAC family and BPQL (stacked learners: the CPU's default
+/// passes of two runs and one, and all three in one pass) and for D2HPG and delayed SAC (their
+/// runs side by side); the seeds' runs differ.
 #[test]
 fn each_run_of_a_stack_logs_exactly_what_its_solo_run_logs() {
-    for (algo, delay) in [
-        ("sac", "0"),
-        ("naive-sac", "2"),
-        ("bpql", "2"),
-        ("d2hpg", "2"),
-        ("delayed-sac", "2"),
+    for (algo, delay, passes) in [
+        ("sac", "0", "0"),
+        ("sac", "0", "3"),
+        ("naive-sac", "2", "0"),
+        ("bpql", "2", "3"),
+        ("d2hpg", "2", "0"),
+        ("delayed-sac", "2", "0"),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let stack = dir.path().join("stack");
@@ -355,7 +336,8 @@ fn each_run_of_a_stack_logs_exactly_what_its_solo_run_logs() {
             &[
                 &["train"],
                 flags.as_slice(),
-                &["--seeds", "0..3", "--out", stack.to_str().unwrap()],
+                &["--seeds", "0..3", "--runs-per-pass", passes],
+                &["--out", stack.to_str().unwrap()],
             ]
             .concat(),
         );

@@ -712,6 +712,7 @@ fn resume_refuses_every_other_setting_by_name_and_never_shortens_a_run() {
             "warmup" => "random",
             "seed" | "envs" | "threads" | "eval-episodes" => "3",
             "seeds" => "0,1",
+            "runs-per-pass" => "2",
             "warmup-steps" | "eval-every" | "checkpoint-every" | "batch-size" => "64",
             "alpha" | "lifting-weight" => "0.5",
             "lifting-samples" => "4",

@@ -36,6 +36,25 @@ fn gpu_present(test: &str) -> bool {
     false
 }
 
+/// The CPU and the wgpu devices.
+fn both_devices() -> (Devices, Devices) {
+    (
+        Devices::new(LearnDevice::Cpu).unwrap(),
+        Devices::new(LearnDevice::Wgpu).unwrap(),
+    )
+}
+
+/// `algo`'s default settings, without dropout: dropout masks come from each backend's own
+/// generator (the same seed draws other masks on wgpu than on Flex), so the devices are
+/// compared without it; the rest is deterministic.
+fn settings_without_dropout(algo: &str) -> AlgoSettings {
+    let mut settings = AlgoSettings::new(algo).unwrap();
+    if settings.fields().contains_key("dropout") {
+        settings.set("dropout=0.0").unwrap();
+    }
+    settings
+}
+
 fn spec(delay: usize) -> AgentSpec {
     AgentSpec {
         obs_dim: 5,
@@ -73,17 +92,9 @@ fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
     if !gpu_present("every_algorithm_updates_the_same_on_wgpu_as_on_cpu") {
         return;
     }
-    let (cpu, gpu) = (
-        Devices::new(LearnDevice::Cpu).unwrap(),
-        Devices::new(LearnDevice::Wgpu).unwrap(),
-    );
+    let (cpu, gpu) = both_devices();
     for algo in names() {
-        let mut settings = AlgoSettings::new(algo).unwrap();
-        if settings.fields().contains_key("dropout") {
-            // Dropout masks come from each backend's own generator (the same seed draws other
-            // masks on wgpu than on Flex): compared without dropout, the rest is deterministic.
-            settings.set("dropout=0.0").unwrap();
-        }
+        let settings = settings_without_dropout(algo);
         let spec = spec(if settings.info().undelayed_only { 0 } else { 3 });
         let mut on_cpu = settings.build(&spec, &cpu, 7);
         let mut on_gpu = settings.build(&spec, &gpu, 7);
@@ -175,15 +186,9 @@ fn every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu() {
     if !gpu_present("every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu") {
         return;
     }
-    let (cpu, gpu) = (
-        Devices::new(LearnDevice::Cpu).unwrap(),
-        Devices::new(LearnDevice::Wgpu).unwrap(),
-    );
+    let (cpu, gpu) = both_devices();
     for algo in names() {
-        let mut settings = AlgoSettings::new(algo).unwrap();
-        if settings.fields().contains_key("dropout") {
-            settings.set("dropout=0.0").unwrap();
-        }
+        let settings = settings_without_dropout(algo);
         let spec = spec(if settings.info().undelayed_only { 0 } else { 3 });
         let mut on_cpu = settings.build_stack(&spec, &cpu, &[7, 8]);
         let mut on_gpu = settings.build_stack(&spec, &gpu, &[1, 2]);

@@ -57,10 +57,16 @@ pub enum ActMode {
 /// Named statistics of one update, a subset of the agent's [`Agent::stat_names`].
 pub type Stats = Vec<(&'static str, f64)>;
 
-/// What the training loop needs of an algorithm.
+/// What the training loop needs of an algorithm: a stack of S runs of one configuration, their
+/// seeds apart, trained side by side, each with its own batches, random streams and folder. A
+/// solo agent (S = 1) implements the one-run methods (`act`, `update`, `save`, `load`); a
+/// stacked one implements `runs` and the per-run methods (`act_run`, `update_runs`,
+/// `save_runs`, `load_runs`); each set's defaults are the other's, so implement one of them.
 pub trait Agent: Send {
-    /// Actions `[rows, act_dim]` for `rows` augmented states `[rows, obs + Δ·act]`.
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32>;
+    /// Actions `[rows, act_dim]` for `rows` augmented states `[rows, obs + Δ·act]` (run 0's).
+    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+        self.act_run(0, augmented, rows, mode)
+    }
     /// Deterministic actions of the delay-free policy for `rows` true states `[rows, obs]`,
     /// evaluated undelayed; `None` unless [`AlgoInfo::delay_free_policy`] says there is one.
     fn act_delay_free(&mut self, _states: &[f32], _rows: usize) -> Option<Vec<f32>> {
@@ -74,18 +80,20 @@ pub trait Agent: Send {
     }
     /// One update of every learner: draws its batches from `ctx` (as many as it needs),
     /// returns the statistics it computed this time (an absent one is logged empty).
-    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError>;
+    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
+        Ok(self.update_runs(std::slice::from_mut(ctx))?.remove(0))
+    }
     /// Networks, optimiser states and random streams, into `dir`.
-    fn save(&self, dir: &Path) -> Result<(), LearnError>;
+    fn save(&self, dir: &Path) -> Result<(), LearnError> {
+        self.save_runs(&[dir])
+    }
     /// Restores what [`Agent::save`] wrote.
-    fn load(&mut self, dir: &Path) -> Result<(), LearnError>;
+    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
+        self.load_runs(&[dir])
+    }
     /// What [`Agent::act`] computes in [`ActMode::Deterministic`], as plain numbers (`dhrl
     /// export`).
     fn acting_network(&self) -> ActingNetwork;
-
-    // A stack: S runs of one configuration (their seeds apart) trained side by side, each
-    // with its own batches, random streams and folder. A solo agent is a stack of one, which
-    // the defaults below describe; the methods above are run 0's.
 
     /// How many runs the agent trains side by side.
     fn runs(&self) -> usize {

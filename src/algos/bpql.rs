@@ -90,10 +90,6 @@ impl Bpql {
 }
 
 impl Agent for Bpql {
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.act_run(0, augmented, rows, mode)
-    }
-
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::Policy {
             input: PolicyInput::AugmentedState,
@@ -103,18 +99,6 @@ impl Agent for Bpql {
 
     fn stat_names(&self) -> Vec<&'static str> {
         SacStats::NAMES.to_vec()
-    }
-
-    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        Ok(self.update_runs(std::slice::from_mut(ctx))?.remove(0))
-    }
-
-    fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.save_runs(&[dir])
-    }
-
-    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.load_runs(&[dir])
     }
 
     fn runs(&self) -> usize {
@@ -130,13 +114,7 @@ impl Agent for Bpql {
         &mut self,
         contexts: &mut [UpdateContext<'_>],
     ) -> Result<Vec<Stats>, ReplayError> {
-        let plain = self.learner.devices.plain.clone();
-        let batches = contexts
-            .iter_mut()
-            .map(|ctx| Ok(beta_batch(&ctx.batch()?, &plain)))
-            .collect::<Result<Vec<_>, ReplayError>>()?;
-        let stats = self.learner.update(&SacBatch::stack(batches));
-        Ok(stats.iter().map(SacStats::named).collect())
+        self.learner.update_runs(contexts, beta_batch)
     }
 
     fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {

@@ -1,5 +1,6 @@
-//! A stack of solo agents: the runs of an algorithm whose learners are not stacked, each its
-//! own agent, updated one after the other. Every run computes exactly what it computes alone.
+//! A stack of agents trained side by side, one after the other: the runs of an algorithm
+//! whose learners are not stacked (each agent one run), or a stack served in several learner
+//! passes (each agent a stack of a few runs). Every run computes exactly what it computes alone.
 use std::path::Path;
 
 use super::agent::{ActMode, Agent, Stats};
@@ -9,22 +10,41 @@ use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::LearnError;
 
 pub struct Independent {
+    /// In run order: the first `agents[0].runs()` runs are the first agent's, and so on.
     agents: Vec<Box<dyn Agent>>,
 }
 
 impl Independent {
-    /// The runs, in order; all of one algorithm and configuration.
+    /// The agents, in run order; all of one algorithm and configuration.
     pub fn new(agents: Vec<Box<dyn Agent>>) -> Independent {
         assert!(!agents.is_empty(), "a stack of at least one run");
         Independent { agents }
     }
+
+    /// The agent that holds run `run`, and the run's place in it.
+    fn agent_of(&mut self, mut run: usize) -> (&mut Box<dyn Agent>, usize) {
+        for agent in &mut self.agents {
+            if run < agent.runs() {
+                return (agent, run);
+            }
+            run -= agent.runs();
+        }
+        panic!("no run {run} in the stack")
+    }
+
+    /// `items` (one per run) cut into each agent's part.
+    fn per_agent<'a, T>(&self, mut items: &'a mut [T]) -> Vec<&'a mut [T]> {
+        let mut parts = Vec::with_capacity(self.agents.len());
+        for agent in &self.agents {
+            let (part, rest) = items.split_at_mut(agent.runs());
+            parts.push(part);
+            items = rest;
+        }
+        parts
+    }
 }
 
 impl Agent for Independent {
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.agents[0].act(augmented, rows, mode)
-    }
-
     fn act_delay_free(&mut self, states: &[f32], rows: usize) -> Option<Vec<f32>> {
         self.agents[0].act_delay_free(states, rows)
     }
@@ -37,52 +57,48 @@ impl Agent for Independent {
         self.agents[0].batch_extras()
     }
 
-    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        self.agents[0].update(ctx)
-    }
-
-    fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.agents[0].save(dir)
-    }
-
-    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.agents[0].load(dir)
-    }
-
     fn acting_network(&self) -> ActingNetwork {
         self.agents[0].acting_network()
     }
 
     fn runs(&self) -> usize {
-        self.agents.len()
+        self.agents.iter().map(|agent| agent.runs()).sum()
     }
 
     fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.agents[run].act(augmented, rows, mode)
+        let (agent, run) = self.agent_of(run);
+        agent.act_run(run, augmented, rows, mode)
     }
 
     fn update_runs(
         &mut self,
         contexts: &mut [UpdateContext<'_>],
     ) -> Result<Vec<Stats>, ReplayError> {
-        self.agents
-            .iter_mut()
-            .zip(contexts)
-            .map(|(agent, ctx)| agent.update(ctx))
-            .collect()
+        let parts = self.per_agent(contexts);
+        let mut stats = Vec::new();
+        for (agent, contexts) in self.agents.iter_mut().zip(parts) {
+            stats.extend(agent.update_runs(contexts)?);
+        }
+        Ok(stats)
     }
 
     fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
-        self.agents
-            .iter()
-            .zip(dirs)
-            .try_for_each(|(agent, dir)| agent.save(dir))
+        let mut dirs = dirs;
+        for agent in &self.agents {
+            let (part, rest) = dirs.split_at(agent.runs());
+            agent.save_runs(part)?;
+            dirs = rest;
+        }
+        Ok(())
     }
 
     fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
-        self.agents
-            .iter_mut()
-            .zip(dirs)
-            .try_for_each(|(agent, dir)| agent.load(dir))
+        let mut dirs = dirs;
+        for agent in &mut self.agents {
+            let (part, rest) = dirs.split_at(agent.runs());
+            agent.load_runs(part)?;
+            dirs = rest;
+        }
+        Ok(())
     }
 }

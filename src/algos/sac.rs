@@ -480,6 +480,22 @@ impl SacLearner {
             .collect()
     }
 
+    /// One update of every run, run `i`'s batch drawn from `contexts[i]` and made into its
+    /// [`SacBatch`] by `batch`; each run's statistics as `train.csv` columns.
+    pub fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+        batch: impl Fn(&Transitions, &Device) -> SacBatch,
+    ) -> Result<Vec<Stats>, ReplayError> {
+        let plain = self.devices.plain.clone();
+        let batches = contexts
+            .iter_mut()
+            .map(|ctx| Ok(batch(&ctx.batch()?, &plain)))
+            .collect::<Result<Vec<_>, ReplayError>>()?;
+        let stats = self.update(&SacBatch::stack(batches));
+        Ok(stats.iter().map(SacStats::named).collect())
+    }
+
     /// Saves run `i`'s networks, optimiser states and noise stream as
     /// `dirs[i]/{prefix}*.bpk|json`, each in a solo run's shapes.
     pub fn save(&self, dirs: &[&Path], prefix: &str) -> Result<(), LearnError> {
@@ -611,10 +627,9 @@ impl SacAgent {
         }
     }
 
-    /// One run's batch on the view.
-    fn batch(&self, batch: &Transitions) -> SacBatch {
-        let plain = &self.learner.devices.plain;
-        let (input, next_input) = self.view.of_batch(batch, &self.spec);
+    /// One run's batch on `view`.
+    fn batch(view: InputView, spec: &AgentSpec, batch: &Transitions, plain: &Device) -> SacBatch {
+        let (input, next_input) = view.of_batch(batch, spec);
         let (input, next_input) = (
             rows(input, batch.len(), plain),
             rows(next_input, batch.len(), plain),
@@ -629,10 +644,6 @@ impl SacAgent {
 }
 
 impl Agent for SacAgent {
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.act_run(0, augmented, rows, mode)
-    }
-
     fn acting_network(&self) -> ActingNetwork {
         let input = match self.view {
             InputView::Augmented => PolicyInput::AugmentedState,
@@ -646,18 +657,6 @@ impl Agent for SacAgent {
 
     fn stat_names(&self) -> Vec<&'static str> {
         SacStats::NAMES.to_vec()
-    }
-
-    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        Ok(self.update_runs(std::slice::from_mut(ctx))?.remove(0))
-    }
-
-    fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.save_runs(&[dir])
-    }
-
-    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.load_runs(&[dir])
     }
 
     fn runs(&self) -> usize {
@@ -679,12 +678,10 @@ impl Agent for SacAgent {
         &mut self,
         contexts: &mut [UpdateContext<'_>],
     ) -> Result<Vec<Stats>, ReplayError> {
-        let batches = contexts
-            .iter_mut()
-            .map(|ctx| Ok(self.batch(&ctx.batch()?)))
-            .collect::<Result<Vec<_>, ReplayError>>()?;
-        let stats = self.learner.update(&SacBatch::stack(batches));
-        Ok(stats.iter().map(SacStats::named).collect())
+        let (view, spec) = (self.view, &self.spec);
+        self.learner.update_runs(contexts, |batch, plain| {
+            SacAgent::batch(view, spec, batch, plain)
+        })
     }
 
     fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {

@@ -84,6 +84,26 @@ impl AlgoSettings {
         self.config.build_stack(spec, devices, seeds)
     }
 
+    /// The runs of `seeds` as one agent whose learners serve `per_pass` runs at a time: stacks
+    /// of that many, updated one after the other.
+    pub fn build_in_passes(
+        &self,
+        spec: &AgentSpec,
+        devices: &Devices,
+        seeds: &[u64],
+        per_pass: usize,
+    ) -> Box<dyn Agent> {
+        if per_pass >= seeds.len() {
+            return self.build_stack(spec, devices, seeds);
+        }
+        Box::new(super::independent::Independent::new(
+            seeds
+                .chunks(per_pass.max(1))
+                .map(|part| self.build_stack(spec, devices, part))
+                .collect(),
+        ))
+    }
+
     /// `--help-config`: every field with its default and its doc.
     pub fn describe(&self) -> String {
         let info = self.info();

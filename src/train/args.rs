@@ -83,6 +83,10 @@ pub struct TrainArgs {
     /// Where the learners run.
     #[arg(long, value_enum)]
     pub device: Option<LearnDevice>,
+    /// With --seeds: runs per learner pass (0: 2 on the CPU, all on a GPU); the same numbers
+    /// whatever it is.
+    #[arg(long, value_name = "N")]
+    pub runs_per_pass: Option<usize>,
     /// Where the delay layer runs: cpu (the reference), or gpu (the WGSL kernels on any
     /// Vulkan adapter, read back every step; the same results).
     #[arg(long, value_enum)]
@@ -192,6 +196,7 @@ impl TrainArgs {
         c.batch_size = self.batch_size.unwrap_or(c.batch_size);
         c.tensorboard &= !self.no_tensorboard;
         c.device = self.device.unwrap_or(c.device);
+        c.runs_per_pass = self.runs_per_pass.unwrap_or(c.runs_per_pass);
         c.delay_device = self.delay_device.unwrap_or(c.delay_device);
         Ok(c)
     }
@@ -224,6 +229,7 @@ impl TrainArgs {
             ("--lifting-weight", self.lifting_weight.is_some()),
             ("--lifting-samples", self.lifting_samples.is_some()),
             ("--device", self.device.is_some()),
+            ("--runs-per-pass", self.runs_per_pass.is_some()),
             ("--delay-device", self.delay_device.is_some()),
             ("--config", self.config.is_some()),
         ]

@@ -42,6 +42,11 @@ pub struct TrainConfig {
     pub tensorboard: bool,
     /// Where the learners run.
     pub device: LearnDevice,
+    /// In a stack (`dhrl train --seeds`), the runs one learner pass serves; the stack's runs
+    /// go through in passes of this many. 0: the device's default, 2 on the CPU (more runs per
+    /// pass outgrow the caches: docs/results/stacking.md) and all of them on a GPU. The
+    /// numbers are the same whatever it is.
+    pub runs_per_pass: usize,
     /// Where the delay layer runs (training and evaluation copies).
     pub delay_device: DelayDevice,
     /// The algorithm and its configuration (`[algo]`, with `name`).
@@ -68,8 +73,20 @@ impl Default for TrainConfig {
             log_every: 1_000,
             tensorboard: true,
             device: LearnDevice::Cpu,
+            runs_per_pass: 0,
             delay_device: DelayDevice::Cpu,
             algo: AlgoSettings::default(),
+        }
+    }
+}
+
+impl TrainConfig {
+    /// The runs one learner pass serves ([`TrainConfig::runs_per_pass`], 0 resolved).
+    pub fn runs_per_learner_pass(&self) -> usize {
+        match (self.runs_per_pass, self.device) {
+            (0, LearnDevice::Cpu) => 2,
+            (0, LearnDevice::Wgpu) => usize::MAX,
+            (runs, _) => runs,
         }
     }
 }

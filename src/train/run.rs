@@ -603,7 +603,10 @@ impl Trainer {
         let spec = AgentSpec::for_model(slots[0].batch.env().model(), delay);
         let devices = Devices::new(first.device)?;
         let seeds: Vec<u64> = slots.iter().map(|slot| slot.config.seed).collect();
-        let agent = first.algo.build_stack(&spec, &devices, &seeds);
+        let agent =
+            first
+                .algo
+                .build_in_passes(&spec, &devices, &seeds, first.runs_per_learner_pass());
         let stat_names = agent.stat_names();
         for slot in &mut slots {
             slot.state.stat_sums = vec![0.0; stat_names.len()];
