@@ -6,7 +6,10 @@
 #   - one learner update, CPU against wgpu, for SAC on InvertedPendulum and D2HPG on
 #     HalfCheetah (Δ = 5), at a run's batch of 256 rows and at 4,096 rows (the rows a stack of
 #     16 runs would hand the device at once);
-#   - SAC trained end to end on InvertedPendulum with the learner on wgpu (1 update per step).
+#   - SAC trained end to end on InvertedPendulum with the learner on wgpu (1 update per step);
+#   - stacked runs (`dhrl train --seeds`) on wgpu, S = 1, 8, 64, 256: env steps per second
+#     summed over the runs, 1 update per step, SAC on InvertedPendulum and D2HPG on HalfCheetah
+#     (Δ = 5; D2HPG's runs have no stacked learner yet: they go one after the other).
 #
 #   scripts/gpu_check.sh                 build here (cargo, feature wgpu-learner) and run
 #   scripts/gpu_check.sh --pack DIR      build here and pack what a machine without a Rust
@@ -116,6 +119,23 @@ for device in cpu wgpu; do
     timeout 60 "$dhrl" train --task inverted-pendulum --algo sac --device "$device" --steps 6000 --warmup-steps 1000 \
         --eval-every 6000 --eval-episodes 2 --threads 1 --out "$run/sac-$device" | tail -n 1 ||
         failed+=("train on $device")
+done
+
+stage "stacked runs on wgpu: env steps/s summed over S runs, 1 update per step"
+for config in "sac inverted-pendulum 0" "d2hpg half-cheetah 5"; do
+    read -r algo task delay <<<"$config"
+    for runs in 1 8 64 256; do
+        printf '%-6s %-18s S = %-4s ' "$algo" "$task" "$runs"
+        begin=$(date +%s.%N)
+        if timeout 60 "$dhrl" train --task "$task" --algo "$algo" --delay "$delay" --device wgpu \
+            --seeds "0..$runs" --steps 300 --warmup-steps 100 --eval-every 300 --eval-episodes 1 \
+            --threads 1 --no-tensorboard --out "$run/stack-$algo-$runs" >/dev/null 2>&1; then
+            awk -v runs="$runs" -v begin="$begin" -v end="$(date +%s.%N)" \
+                'BEGIN { printf "%.0f env steps/s\n", runs * 300 / (end - begin) }'
+        else
+            echo "did not finish within 60 s"
+        fi
+    done
 done
 
 stage "done"

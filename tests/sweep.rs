@@ -211,14 +211,28 @@ fn finished_return(sweep: &Sweep, index: usize) -> f64 {
     }
 }
 
-/// `dhrl sweep run FOLDER --jobs 2` in the background, its output kept.
-fn start_runner(folder: &str) -> Child {
+/// `dhrl sweep run FOLDER --jobs 2 EXTRA…` in the background, its output kept.
+fn start_runner(folder: &str, extra: &[&str]) -> Child {
     Command::new(env!("CARGO_BIN_EXE_dhrl"))
         .args(["sweep", "run", folder, "--jobs", "2"])
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap()
+}
+
+/// Starts `dhrl sweep run FOLDER --jobs 2 EXTRA…` and kills it (runner and runs, which have
+/// their own process groups) once the first checkpoints exist.
+fn start_and_kill_runner(sweep: &Sweep, folder: &str, extra: &[&str]) {
+    let mut runner = start_runner(folder, extra);
+    wait_for_a_checkpoint(sweep, &sweep.runs);
+    // Every process whose command line names this sweep's (temporary, unique) folder.
+    Command::new("pkill")
+        .args(["-KILL", "-f", folder])
+        .status()
+        .unwrap();
+    runner.wait().unwrap();
 }
 
 /// Waits (two minutes at most) until one of `runs` has written a checkpoint.
@@ -264,16 +278,8 @@ fn local_runner_finishes_every_run_and_a_killed_sweep_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let sweep = plan_tiny(dir.path());
     let folder = sweep.dir.to_str().unwrap().to_string();
-    // Start the sweep, kill it (runner and runs, which have their own process groups) once
-    // the first checkpoints exist, start it again.
-    let mut runner = start_runner(&folder);
-    wait_for_a_checkpoint(&sweep, &sweep.runs);
-    // Every process whose command line names this sweep's (temporary, unique) folder.
-    Command::new("pkill")
-        .args(["-KILL", "-f", &folder])
-        .status()
-        .unwrap();
-    runner.wait().unwrap();
+    // Start the sweep, kill it once the first checkpoints exist, start it again.
+    start_and_kill_runner(&sweep, &folder, &[]);
     let cut = sweep.runs.iter().filter(|r| !sweep.finished(r)).count();
     assert!(cut > 0, "the kill came after every run had finished");
     let printed = ok(&dhrl(&["sweep", "run", &folder, "--jobs", "2"]));
@@ -366,7 +372,7 @@ fn a_runner_stopped_by_sigterm_stops_its_runs_with_checkpoints() {
     let dir = tempfile::tempdir().unwrap();
     let sweep = plan_tiny(dir.path());
     let folder = sweep.dir.to_str().unwrap().to_string();
-    let runner = start_runner(&folder);
+    let runner = start_runner(&folder, &[]);
     wait_for_a_checkpoint(&sweep, &sweep.runs);
     Command::new("kill")
         .args(["-TERM", &runner.id().to_string()])
@@ -557,4 +563,53 @@ fn a_slurm_array_requeues_stopped_tasks_and_ends_like_the_local_runner() {
     // Nothing is left to submit.
     let printed = ok(&dhrl(&["sweep", "slurm", &folder]));
     assert!(printed.contains("every run has finished"), "{printed}");
+}
+
+/// `dhrl sweep run --stack 2` trains each cell's two seeds as one stack per process: killed
+/// once the first checkpoints exist and started again, every run ends with the logs of its
+/// configuration trained alone in one go, its status recorded. `sweep slurm --stack 2` writes
+/// one array task per stack group, and `run-one --stack 2 --group G` finds a finished group
+/// finished.
+#[test]
+fn a_stacked_sweep_resumes_and_ends_as_its_runs_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = plan_tiny(dir.path());
+    let folder = sweep.dir.to_str().unwrap().to_string();
+    let groups = dhrl::sweep::stack_groups(&sweep, 2);
+    assert_eq!(groups.len(), 2, "{groups:?}");
+    for group in &groups {
+        let (a, b) = (&sweep.runs[group[0]].config, &sweep.runs[group[1]].config);
+        assert_ne!(a.seed, b.seed);
+        assert_eq!(
+            (a.algo.name(), a.delay.observation_delay),
+            (b.algo.name(), b.delay.observation_delay)
+        );
+    }
+    let printed = ok(&dhrl(&["sweep", "slurm", &folder, "--stack", "2"]));
+    assert!(
+        printed.contains("2 stacks (manifest stack groups 0..=1)"),
+        "{printed}"
+    );
+    let script = std::fs::read_to_string(sweep.dir.join("slurm/array-0.sbatch")).unwrap();
+    for line in [
+        "#SBATCH --array=0-1",
+        "runs=(0 1)",
+        "--stack 2 --group \"$index\"",
+    ] {
+        assert!(script.contains(line), "{line} not in {script}");
+    }
+    start_and_kill_runner(&sweep, &folder, &["--stack", "2"]);
+    let printed = ok(&dhrl(&[
+        "sweep", "run", &folder, "--jobs", "2", "--stack", "2",
+    ]));
+    assert!(printed.contains("4 finished, 0 failed"), "{printed}");
+    for run in &sweep.runs {
+        let whole = train_in_one_go(dir.path(), run);
+        assert_same_logs(&sweep.run_dir(run), &whole);
+        assert!(finished_return(&sweep, run.index).is_finite());
+    }
+    let printed = ok(&dhrl(&[
+        "sweep", "run-one", &folder, "--stack", "2", "--group", "1",
+    ]));
+    assert_eq!(printed.matches("finished before").count(), 2, "{printed}");
 }

@@ -176,6 +176,9 @@ pub struct AlgoInfo {
     pub delayed_only: bool,
     /// Learners updated side by side (rayon threads an update can use to advantage).
     pub learner_threads: usize,
+    /// Whether its learners are stacked ([`AlgoConfig::build_stack`] builds one learner that
+    /// serves all the runs of a stack in one pass); otherwise a stack's runs go side by side.
+    pub stacked_learner: bool,
     /// Fields shown in plot labels: `(symbol, field)`, e.g. `("λ", "lifting_weight")`.
     pub label_fields: &'static [(&'static str, &'static str)],
 }
@@ -199,6 +202,7 @@ impl AlgoInfo {
             undelayed_only: false,
             delayed_only: false,
             learner_threads: 1,
+            stacked_learner: false,
             label_fields: &[],
         }
     }

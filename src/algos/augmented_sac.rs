@@ -15,12 +15,15 @@ crate::algo_config! {
 }
 
 impl AlgoConfig for Config {
-    const INFO: AlgoInfo = AlgoInfo::single_learner(
-        "augmented-sac",
-        "Augmented SAC",
-        "SAC with actor and critic on the augmented state x_t",
-        true,
-    );
+    const INFO: AlgoInfo = AlgoInfo {
+        stacked_learner: true,
+        ..AlgoInfo::single_learner(
+            "augmented-sac",
+            "Augmented SAC",
+            "SAC with actor and critic on the augmented state x_t",
+            true,
+        )
+    };
 
     fn validate(&self) -> Result<(), AlgoError> {
         self.sac.check(Self::INFO.name)

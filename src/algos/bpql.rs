@@ -30,6 +30,7 @@ crate::algo_config! {
 impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo {
         in_lifting_ablation: true,
+        stacked_learner: true,
         ..AlgoInfo::single_learner(
             "bpql",
             "BPQL",

@@ -89,6 +89,7 @@ const D2HPG_INFO: AlgoInfo = AlgoInfo {
     undelayed_only: false,
     delayed_only: false,
     learner_threads: 2,
+    stacked_learner: false,
     label_fields: &[("λ", "lifting_weight"), ("K", "lifting_samples")],
 };
 

@@ -175,6 +175,7 @@ impl AlgoConfig for Config {
         undelayed_only: false,
         delayed_only: false,
         learner_threads: 2,
+        stacked_learner: false,
         label_fields: &[
             ("λ", "lifting_weight"),
             ("d", "latent_dim"),

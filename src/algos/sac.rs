@@ -88,6 +88,7 @@ impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo {
         undelayed_only: true,
         role: Role::Reference,
+        stacked_learner: true,
         ..AlgoInfo::single_learner(
             "sac",
             "Delay-free SAC",

@@ -12,8 +12,8 @@ use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
 
 use dhrl::sweep::{
     EXIT_BUSY, EXIT_INTERRUPTED, Experiment, PRESETS, RunOneResult, RunOutcome, RunState,
-    SlurmOptions, Sweep, estimate_cost, run_local, run_one, shell_quote, steps_done,
-    write_array_scripts, write_atomically,
+    SlurmOptions, Sweep, estimate_cost, run_group, run_local, shell_quote, stack_groups,
+    steps_done, write_array_scripts, write_atomically,
 };
 use dhrl::tasks::TaskName;
 
@@ -79,14 +79,25 @@ pub struct RunArgs {
     /// Run failed runs again (by default they stay failed, with their error in status/).
     #[arg(long)]
     retry_failed: bool,
+    /// Train up to S runs of one cell (seeds apart) as one stack per process (`dhrl train
+    /// --seeds`); each run keeps its own folder, status and resume.
+    #[arg(long, value_name = "S", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    stack: u64,
 }
 
 #[derive(Args)]
 pub struct RunOneArgs {
     dir: PathBuf,
     /// The run's line in the manifest, from 0; $SLURM_ARRAY_TASK_ID when not given.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "group")]
     index: Option<usize>,
+    /// Runs the stack group G (of `dhrl sweep status`'s groups of --stack S) instead of one
+    /// run; $SLURM_ARRAY_TASK_ID when not given.
+    #[arg(long, value_name = "S", value_parser = clap::value_parser!(u64).range(1..))]
+    stack: Option<u64>,
+    /// The stack group, from 0 (with --stack).
+    #[arg(long, value_name = "G", requires = "stack")]
+    group: Option<usize>,
 }
 
 #[derive(Args)]
@@ -123,6 +134,9 @@ pub struct SlurmArgs {
     /// Submit the scripts with `sbatch` (otherwise they are only written).
     #[arg(long)]
     submit: bool,
+    /// Runs per task: up to S runs of one cell (seeds apart) trained as one stack.
+    #[arg(long, value_name = "S", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    stack: u64,
 }
 
 #[derive(Args)]
@@ -249,19 +263,29 @@ fn run_here(args: &RunArgs) -> anyhow::Result<()> {
         signal_hook::flag::register(signal, Arc::clone(&stop))
             .context("installing the runner's signal handlers")?;
     }
+    let stack = args.stack as usize;
     let summary = run_local(
         &sweep,
         args.jobs,
+        stack,
         args.retry_failed,
         std::io::IsTerminal::is_terminal(&std::io::stderr()),
         &stop,
-        |index, log| {
+        |unit, log| {
             let err = log.try_clone()?;
+            let which = match stack {
+                1 => vec!["--index".to_string(), unit.to_string()],
+                _ => vec![
+                    "--stack".into(),
+                    stack.to_string(),
+                    "--group".into(),
+                    unit.to_string(),
+                ],
+            };
             Command::new(&exe)
                 .args(["sweep", "run-one"])
                 .arg(&args.dir)
-                .arg("--index")
-                .arg(index.to_string())
+                .args(which)
                 .env_remove("SLURM_ARRAY_TASK_ID")
                 .stdin(Stdio::null())
                 .stdout(log)
@@ -292,39 +316,68 @@ fn run_here(args: &RunArgs) -> anyhow::Result<()> {
 }
 
 fn run_single(args: &RunOneArgs) -> anyhow::Result<()> {
-    let index = match args.index {
+    let index = match args.index.or(args.group) {
         Some(index) => index,
         None => std::env::var("SLURM_ARRAY_TASK_ID")
             .ok()
             .and_then(|v| v.parse().ok())
-            .context("--index is needed (or SLURM_ARRAY_TASK_ID, inside a Slurm array job)")?,
+            .context(
+                "--index (or --group) is needed, or SLURM_ARRAY_TASK_ID inside a Slurm array job",
+            )?,
     };
     let sweep = Sweep::open(&args.dir)?;
     dhrl::train::stop_on_signals()?;
-    let id = sweep.run(index)?.id.clone();
-    match run_one(&sweep, index, false)? {
-        RunOneResult::AlreadyFinished => println!("{id}: finished before"),
-        RunOneResult::Busy => {
-            eprintln!("{id}: another process is running it");
-            std::process::exit(EXIT_BUSY);
+    let group = match args.stack {
+        None => vec![sweep.run(index)?.index],
+        Some(stack) => {
+            let groups = stack_groups(&sweep, stack as usize);
+            groups.get(index).cloned().with_context(|| {
+                format!(
+                    "no stack group {index}: with --stack {stack} the sweep has groups 0..={}",
+                    groups.len().saturating_sub(1)
+                )
+            })?
         }
-        RunOneResult::Ended(RunOutcome::Finished {
-            env_steps,
-            wall_seconds,
-            final_return,
-        }) => println!(
-            "{id}: finished, {env_steps} steps in {wall_seconds:.0} s, final return {}",
-            final_return.map_or("-".into(), |r| format!("{r:.1}"))
-        ),
-        RunOneResult::Ended(RunOutcome::Interrupted { env_steps }) => {
-            eprintln!(
-                "{id}: stopped at step {env_steps} with a checkpoint; start it again to resume"
-            );
-            std::process::exit(EXIT_INTERRUPTED);
+    };
+    let (mut interrupted, mut busy, mut failed) = (false, false, Vec::new());
+    for (index, result) in run_group(&sweep, &group, false)? {
+        let id = &sweep.runs[index].id;
+        match result {
+            RunOneResult::AlreadyFinished => println!("{id}: finished before"),
+            RunOneResult::Busy => {
+                eprintln!("{id}: another process is running it");
+                busy = true;
+            }
+            RunOneResult::Ended(RunOutcome::Finished {
+                env_steps,
+                wall_seconds,
+                final_return,
+            }) => println!(
+                "{id}: finished, {env_steps} steps in {wall_seconds:.0} s, final return {}",
+                final_return.map_or("-".into(), |r| format!("{r:.1}"))
+            ),
+            RunOneResult::Ended(RunOutcome::Interrupted { env_steps }) => {
+                eprintln!(
+                    "{id}: stopped at step {env_steps} with a checkpoint; start it again to resume"
+                );
+                interrupted = true;
+            }
+            RunOneResult::Ended(RunOutcome::Failed { error }) => {
+                eprintln!("{id}: {error}");
+                failed.push(id.clone());
+            }
         }
-        RunOneResult::Ended(RunOutcome::Failed { error }) => anyhow::bail!("{id}: {error}"),
     }
-    Ok(())
+    if interrupted {
+        std::process::exit(EXIT_INTERRUPTED);
+    }
+    if busy {
+        std::process::exit(EXIT_BUSY);
+    }
+    match failed.len() {
+        0 => Ok(()),
+        _ => anyhow::bail!("failed: {}", failed.join(", ")),
+    }
 }
 
 fn slurm(args: &SlurmArgs) -> anyhow::Result<()> {
@@ -340,6 +393,7 @@ fn slurm(args: &SlurmArgs) -> anyhow::Result<()> {
         signal_lead: args.signal_lead,
         max_array_size: args.max_array_size,
         extra: args.extra.clone(),
+        stack: args.stack as usize,
     };
     let scripts = write_array_scripts(&sweep, &exe, &options)?;
     if scripts.is_empty() {
@@ -351,9 +405,15 @@ fn slurm(args: &SlurmArgs) -> anyhow::Result<()> {
     }
     for script in &scripts {
         println!(
-            "{}: {} runs (manifest indices {}..={})",
+            "{}: {} {} (manifest {} {}..={})",
             script.path.display(),
             script.runs.len(),
+            if args.stack > 1 { "stacks" } else { "runs" },
+            if args.stack > 1 {
+                "stack groups"
+            } else {
+                "indices"
+            },
             script.runs[0],
             script.runs[script.runs.len() - 1]
         );

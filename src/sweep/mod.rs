@@ -13,7 +13,8 @@ pub use cost::{CostRow, estimate_cost};
 pub use experiment::{DelayKind, Experiment, PRESETS, PlannedRun, run_id};
 pub use manifest::{ManifestRun, PlanChange, RunOutcome, RunState, Sweep, write_atomically};
 pub use runner::{
-    EXIT_BUSY, EXIT_INTERRUPTED, LocalSummary, RunOneResult, run_local, run_one, steps_done,
+    EXIT_BUSY, EXIT_INTERRUPTED, LocalSummary, RunOneResult, run_group, run_local, run_one,
+    stack_groups, steps_done,
 };
 pub use slurm::{ArrayScript, SlurmOptions, shell_quote, time_limit_seconds, write_array_scripts};
 

@@ -2,7 +2,7 @@
 //! end), or all of them on this machine, N child processes at a time ([`run_local`]).
 use std::collections::VecDeque;
 use std::fs::File;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Child;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -10,7 +10,8 @@ use std::time::Duration;
 use super::SweepError;
 use super::manifest::{ManifestRun, RunOutcome, RunState, Sweep};
 use crate::progress::Progress;
-use crate::train::{Start, TrainError, has_checkpoint, train};
+
+use crate::train::{Start, TrainConfig, TrainError, TrainSummary, checkpoint_step, train_stack};
 
 /// The exit code of `dhrl sweep run-one` for a run stopped by a signal after a checkpoint
 /// (EX_TEMPFAIL): the engine should start it again.
@@ -33,39 +34,80 @@ pub enum RunOneResult {
 /// checkpoint. The outcome is recorded in the sweep folder. A lock file keeps two processes
 /// from running the same run.
 pub fn run_one(sweep: &Sweep, index: usize, progress: bool) -> Result<RunOneResult, SweepError> {
-    let run = sweep.run(index)?;
-    if sweep.finished(run) {
-        return Ok(RunOneResult::AlreadyFinished);
-    }
-    let Some(_lock) = lock(sweep, run)? else {
-        return Ok(RunOneResult::Busy);
-    };
-    // Another process may have finished it between the look above and the lock.
-    if sweep.finished(run) {
-        return Ok(RunOneResult::AlreadyFinished);
-    }
-    sweep.clear_outcome(run)?;
-    let dir = sweep.run_dir(run);
-    let io = |path: &Path| {
-        let path = path.display().to_string();
-        move |e: std::io::Error| SweepError::Io {
-            path,
-            message: e.to_string(),
+    Ok(run_group(sweep, &[index], progress)?.remove(0).1)
+}
+
+/// Runs (or resumes) the runs at `group` (of one cell: one configuration, their seeds apart)
+/// as stacks in this process ([`crate::train::train_stack`]), each as [`run_one`] would run it
+/// alone: the finished ones and those another process holds are left out, the others locked;
+/// those without a checkpoint start as one stack, those with one resume in stacks of one
+/// checkpoint step (a run's checkpoint is whole on its own). Each run's outcome is recorded.
+pub fn run_group(
+    sweep: &Sweep,
+    group: &[usize],
+    progress: bool,
+) -> Result<Vec<(usize, RunOneResult)>, SweepError> {
+    let mut results = Vec::new();
+    let mut locks = Vec::new();
+    // Runs to start, and runs to resume by their checkpoint's step.
+    let mut fresh = Vec::new();
+    let mut resumed: std::collections::BTreeMap<u64, Vec<&ManifestRun>> = Default::default();
+    for &index in group {
+        let run = sweep.run(index)?;
+        if sweep.finished(run) {
+            results.push((index, RunOneResult::AlreadyFinished));
+            continue;
         }
-    };
-    let start = if has_checkpoint(&dir) {
-        Start::Resume
-    } else {
-        if dir.exists() {
-            let aside = dir.with_extension("without-checkpoint");
-            if aside.exists() {
-                std::fs::remove_dir_all(&aside).map_err(io(&aside))?;
+        let Some(lock) = lock(sweep, run)? else {
+            results.push((index, RunOneResult::Busy));
+            continue;
+        };
+        // Another process may have finished it between the look above and the lock.
+        if sweep.finished(run) {
+            results.push((index, RunOneResult::AlreadyFinished));
+            continue;
+        }
+        locks.push(lock);
+        sweep.clear_outcome(run)?;
+        let dir = sweep.run_dir(run);
+        match checkpoint_step(&dir) {
+            Some(step) => resumed.entry(step).or_default().push(run),
+            None => {
+                set_aside(&dir)?;
+                fresh.push(run);
             }
-            std::fs::rename(&dir, &aside).map_err(io(&dir))?;
         }
-        Start::Fresh
-    };
-    let outcome = match train(&run.config, &dir, start, progress) {
+    }
+    let stacks = std::iter::once((fresh, Start::Fresh))
+        .chain(resumed.into_values().map(|runs| (runs, Start::Resume)));
+    for (runs, start) in stacks {
+        if runs.is_empty() {
+            continue;
+        }
+        let members: Vec<(TrainConfig, PathBuf)> = runs
+            .iter()
+            .map(|run| (run.config.clone(), sweep.run_dir(run)))
+            .collect();
+        let outcomes: Vec<RunOutcome> = match train_stack(&members, &members[0].1, start, progress)
+        {
+            Ok(ended) => ended.into_iter().map(outcome).collect(),
+            Err(whole) => {
+                let shared = outcome(Err(whole));
+                vec![shared; runs.len()]
+            }
+        };
+        for (run, outcome) in runs.iter().zip(outcomes) {
+            sweep.record(run, &outcome)?;
+            results.push((run.index, RunOneResult::Ended(outcome)));
+        }
+    }
+    results.sort_by_key(|(index, _)| group.iter().position(|i| i == index));
+    Ok(results)
+}
+
+/// How a run's training ended, as the sweep records it.
+fn outcome(ended: Result<TrainSummary, TrainError>) -> RunOutcome {
+    match ended {
         Ok(summary) => RunOutcome::Finished {
             env_steps: summary.env_steps,
             wall_seconds: summary.wall_seconds,
@@ -75,9 +117,53 @@ pub fn run_one(sweep: &Sweep, index: usize, progress: bool) -> Result<RunOneResu
         Err(e) => RunOutcome::Failed {
             error: e.to_string(),
         },
+    }
+}
+
+/// Moves a run folder without a checkpoint (the logs of its first steps only) aside to
+/// `<folder>.without-checkpoint`, so that the run starts afresh.
+fn set_aside(dir: &Path) -> Result<(), SweepError> {
+    let io = |path: &Path| {
+        let path = path.display().to_string();
+        move |e: std::io::Error| SweepError::Io {
+            path,
+            message: e.to_string(),
+        }
     };
-    sweep.record(run, &outcome)?;
-    Ok(RunOneResult::Ended(outcome))
+    if dir.exists() {
+        let aside = dir.with_extension("without-checkpoint");
+        if aside.exists() {
+            std::fs::remove_dir_all(&aside).map_err(io(&aside))?;
+        }
+        std::fs::rename(dir, &aside).map_err(io(dir))?;
+    }
+    Ok(())
+}
+
+/// The sweep's runs in stacks of at most `size`: each cell's runs (one configuration, their
+/// seeds apart) in manifest order, cut into groups of `size`; with `size` 1, every run alone in
+/// manifest order. Fixed by the manifest alone (finished runs keep their place), so that a
+/// group's number names the same runs in every engine and after every restart.
+pub fn stack_groups(sweep: &Sweep, size: usize) -> Vec<Vec<usize>> {
+    if size <= 1 {
+        return sweep.runs.iter().map(|run| vec![run.index]).collect();
+    }
+    let mut cells: Vec<(String, Vec<usize>)> = Vec::new();
+    for run in &sweep.runs {
+        let cell = toml::to_string(&TrainConfig {
+            seed: 0,
+            ..run.config.clone()
+        })
+        .unwrap_or_default();
+        match cells.iter_mut().find(|(key, _)| *key == cell) {
+            Some((_, runs)) => runs.push(run.index),
+            None => cells.push((cell, vec![run.index])),
+        }
+    }
+    cells
+        .into_iter()
+        .flat_map(|(_, runs)| runs.chunks(size).map(<[usize]>::to_vec).collect::<Vec<_>>())
+        .collect()
 }
 
 /// An exclusive lock on `runs/<id>.lock`, or `None` when another process holds it.
@@ -121,33 +207,54 @@ pub struct LocalSummary {
 const TICK: Duration = Duration::from_millis(500);
 const BUSY_RETRIES: u32 = 10;
 
-/// Runs every run of `sweep` that has not finished, `jobs` at a time, each in a child process
-/// from `spawn(index, log)` (which runs [`run_one`] with its output into `log`). Failed runs
-/// are recorded and skipped unless `retry_failed`; one failure never stops the others. When
-/// `stop` becomes true (the runner's own SIGTERM, SIGINT or SIGHUP), no run is started any
-/// more, the running ones get SIGTERM (they checkpoint and exit) and the runner waits for
+/// Runs every run of `sweep` that has not finished, `jobs` processes at a time: with `stack`
+/// 1 each run in its own child process, with `stack` S the runs in the groups of
+/// [`stack_groups`], one child per group, from `spawn(unit, log)` (which runs [`run_one`] on
+/// run `unit`, or [`run_group`] on group `unit`, with its output into `log`). Failed runs are
+/// recorded and skipped unless `retry_failed`; one failure never stops the others. When `stop`
+/// becomes true (the runner's own SIGTERM, SIGINT or SIGHUP), nothing is started any more,
+/// the running children get SIGTERM (their runs checkpoint and exit) and the runner waits for
 /// them. Killed outright, the sweep resumes its cut runs when started again.
 pub fn run_local(
     sweep: &Sweep,
     jobs: usize,
+    stack: usize,
     retry_failed: bool,
     progress: bool,
     stop: &AtomicBool,
     spawn: impl Fn(usize, File) -> std::io::Result<Child>,
 ) -> Result<LocalSummary, SweepError> {
     let mut summary = LocalSummary::default();
-    let mut todo: VecDeque<(&ManifestRun, u32)> = VecDeque::new();
-    for run in &sweep.runs {
+    let to_run = |run: &ManifestRun| match sweep.state(run) {
+        RunState::Ended(RunOutcome::Finished { .. }) => false,
+        RunState::Ended(RunOutcome::Failed { .. }) => retry_failed,
+        _ => true,
+    };
+    for run in sweep.runs.iter().filter(|run| !to_run(run)) {
         match sweep.state(run) {
             RunState::Ended(RunOutcome::Finished { .. }) => summary.finished += 1,
-            RunState::Ended(RunOutcome::Failed { .. }) if !retry_failed => summary.failed += 1,
-            _ => todo.push_back((run, 0)),
+            _ => summary.failed += 1,
         }
     }
+    // Each unit: its number for `spawn`, its runs still to run, the tries so far.
+    type Unit<'a> = (usize, Vec<&'a ManifestRun>, u32);
+    let mut todo: VecDeque<Unit> = stack_groups(sweep, stack)
+        .into_iter()
+        .enumerate()
+        .filter_map(|(group, indices)| {
+            let runs: Vec<&ManifestRun> = indices
+                .iter()
+                .map(|&i| &sweep.runs[i])
+                .filter(|run| to_run(run))
+                .collect();
+            let unit = if stack <= 1 { indices[0] } else { group };
+            (!runs.is_empty()).then_some((unit, runs, 0))
+        })
+        .collect();
     // Steps done per run of this runner's, refreshed for the running ones only.
     let mut steps: Vec<(&ManifestRun, u64)> = todo
         .iter()
-        .map(|(r, _)| (*r, steps_done(sweep, r)))
+        .flat_map(|(_, runs, _)| runs.iter().map(|r| (*r, steps_done(sweep, r))))
         .collect();
     let total_steps: u64 = steps.iter().map(|(r, _)| r.config.steps).sum();
     let steps_before: u64 = steps.iter().map(|(_, s)| s).sum();
@@ -164,97 +271,106 @@ pub fn run_local(
         path: logs.display().to_string(),
         message: e.to_string(),
     })?;
-    let mut running: Vec<(&ManifestRun, u32, Child)> = Vec::new();
+    let mut running: Vec<(Unit, Child)> = Vec::new();
     let mut stopping = false;
     while !running.is_empty() || (!todo.is_empty() && !stopping) {
         if stop.load(Ordering::Relaxed) && !stopping {
             stopping = true;
             say(format!(
-                "stopping: {} running runs checkpoint and exit",
+                "stopping: {} running processes checkpoint and exit",
                 running.len()
             ));
-            for (_, _, child) in &running {
+            for (_, child) in &running {
                 // SAFETY: kill(2) on our own child's pid, which we have not waited for yet.
                 unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
             }
         }
         while !stopping
             && running.len() < jobs.max(1)
-            && let Some((run, tries)) = todo.pop_front()
+            && let Some(unit) = todo.pop_front()
         {
-            let path = logs.join(format!("{}.log", run.id));
+            // A stack's output goes to its first run's log.
+            let path = logs.join(format!("{}.log", unit.1[0].id));
             let child = File::options()
                 .create(true)
                 .append(true)
                 .open(&path)
-                .and_then(|log| spawn(run.index, log))
+                .and_then(|log| spawn(unit.0, log))
                 .map_err(|e| SweepError::Io {
                     path: path.display().to_string(),
-                    message: format!("could not start run {}: {e}", run.id),
+                    message: format!("could not start run {}: {e}", unit.1[0].id),
                 })?;
-            running.push((run, tries, child));
+            running.push((unit, child));
         }
         std::thread::sleep(TICK);
         let mut k = 0;
         while k < running.len() {
-            let exited = running[k].2.try_wait().map_err(|e| SweepError::Io {
-                path: running[k].0.id.clone(),
+            let exited = running[k].1.try_wait().map_err(|e| SweepError::Io {
+                path: running[k].0.1[0].id.clone(),
                 message: e.to_string(),
             })?;
             let Some(status) = exited else {
                 k += 1;
                 continue;
             };
-            let (run, tries, _) = running.swap_remove(k);
-            match (status.code(), sweep.state(run)) {
-                (Some(EXIT_BUSY), _) if tries < BUSY_RETRIES && !stopping => {
-                    // Perhaps a killed process still lets go of it: try again later.
-                    todo.push_back((run, tries + 1));
-                }
-                (Some(EXIT_BUSY), _) => {
-                    summary.busy += 1;
-                    say(format!("{}: another process is running it", run.id));
-                }
-                (Some(0), RunState::Ended(RunOutcome::Finished { final_return, .. })) => {
-                    summary.finished += 1;
-                    say(format!(
-                        "{}: finished, final return {}",
-                        run.id,
-                        final_return.map_or("-".into(), |r| format!("{r:.1}"))
-                    ));
-                }
-                (Some(EXIT_INTERRUPTED), _) => {
-                    summary.interrupted += 1;
-                    say(format!("{}: stopped with a checkpoint", run.id));
-                }
-                (Some(_), RunState::Ended(RunOutcome::Failed { error })) => {
-                    summary.failed += 1;
-                    say(format!("{}: failed: {error}", run.id));
-                }
-                (None, _) => {
-                    // Killed by a signal: its last checkpoint stands, the next start resumes it.
-                    summary.interrupted += 1;
-                    say(format!(
-                        "{}: its process was killed ({status}); the next start resumes it",
-                        run.id
-                    ));
-                }
-                (Some(_), _) => {
-                    // Ended before it could record anything (see its log).
-                    let error = format!(
-                        "the run's process ended with {status} (see logs/{}.log)",
-                        run.id
-                    );
-                    if let Some(_lock) = lock(sweep, run)? {
-                        sweep.record(
-                            run,
-                            &RunOutcome::Failed {
-                                error: error.clone(),
-                            },
-                        )?;
+            let ((unit, runs, tries), _) = running.swap_remove(k);
+            let mut busy = Vec::new();
+            for run in runs {
+                match (status.code(), sweep.state(run)) {
+                    (_, RunState::Ended(RunOutcome::Finished { final_return, .. })) => {
+                        summary.finished += 1;
+                        say(format!(
+                            "{}: finished, final return {}",
+                            run.id,
+                            final_return.map_or("-".into(), |r| format!("{r:.1}"))
+                        ));
                     }
-                    summary.failed += 1;
-                    say(format!("{}: failed: {error}", run.id));
+                    (_, RunState::Ended(RunOutcome::Failed { error })) => {
+                        summary.failed += 1;
+                        say(format!("{}: failed: {error}", run.id));
+                    }
+                    (Some(EXIT_INTERRUPTED), _)
+                    | (_, RunState::Ended(RunOutcome::Interrupted { .. })) => {
+                        summary.interrupted += 1;
+                        say(format!("{}: stopped with a checkpoint", run.id));
+                    }
+                    (Some(EXIT_BUSY), _) => busy.push(run),
+                    (None, _) => {
+                        // Killed by a signal: its last checkpoint stands, the next start resumes it.
+                        summary.interrupted += 1;
+                        say(format!(
+                            "{}: its process was killed ({status}); the next start resumes it",
+                            run.id
+                        ));
+                    }
+                    (Some(_), _) => {
+                        // Ended before it could record anything (see its log).
+                        let error = format!(
+                            "the run's process ended with {status} (see logs/{}.log)",
+                            run.id
+                        );
+                        if let Some(_lock) = lock(sweep, run)? {
+                            sweep.record(
+                                run,
+                                &RunOutcome::Failed {
+                                    error: error.clone(),
+                                },
+                            )?;
+                        }
+                        summary.failed += 1;
+                        say(format!("{}: failed: {error}", run.id));
+                    }
+                }
+            }
+            if !busy.is_empty() {
+                if tries < BUSY_RETRIES && !stopping {
+                    // Perhaps a killed process still lets go of them: try again later.
+                    todo.push_back((unit, busy, tries + 1));
+                } else {
+                    for run in busy {
+                        summary.busy += 1;
+                        say(format!("{}: another process is running it", run.id));
+                    }
                 }
             }
         }
@@ -266,7 +382,7 @@ pub fn run_local(
         }
         bar.set_position(steps.iter().map(|(_, s)| s).sum());
         bar.set_message(format!(
-            "runs: {} finished, {} running, {} failed, {} to start",
+            "runs: {} finished, {} processes running, {} failed, {} to start",
             summary.finished,
             running.len(),
             summary.failed,

@@ -31,6 +31,8 @@ pub struct SlurmOptions {
     pub max_array_size: usize,
     /// More `#SBATCH` options, each one argument as given to `sbatch` (`--qos=long`).
     pub extra: Vec<String>,
+    /// Runs per task: each task trains a group of [`super::stack_groups`] as one stack.
+    pub stack: usize,
 }
 
 impl Default for SlurmOptions {
@@ -45,11 +47,13 @@ impl Default for SlurmOptions {
             signal_lead: 300,
             max_array_size: 1001,
             extra: Vec::new(),
+            stack: 1,
         }
     }
 }
 
-/// One job script written into `DIR/slurm/`: its array task `i` runs manifest run `runs[i]`.
+/// One job script written into `DIR/slurm/`: its array task `i` runs manifest run `runs[i]`
+/// (with a stack, group `runs[i]` of [`super::stack_groups`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArrayScript {
     pub path: PathBuf,
@@ -78,6 +82,13 @@ pub fn write_array_scripts(
     })?;
     remove_earlier_scripts(&slurm)?;
     let unfinished: Vec<&ManifestRun> = sweep.runs.iter().filter(|r| !sweep.finished(r)).collect();
+    // What the array's tasks take: the unfinished runs, or the groups holding one.
+    let units: Vec<usize> = super::stack_groups(sweep, options.stack)
+        .into_iter()
+        .enumerate()
+        .filter(|(_, group)| group.iter().any(|&i| !sweep.finished(&sweep.runs[i])))
+        .map(|(number, group)| if options.stack <= 1 { group[0] } else { number })
+        .collect();
     let cpus = match options.cpus_per_task {
         Some(cpus) => cpus,
         None => unfinished
@@ -90,11 +101,11 @@ pub fn write_array_scripts(
         .file_name()
         .map_or("sweep".into(), |n| n.to_string_lossy().into_owned());
     let mut scripts = Vec::new();
-    for (k, chunk) in unfinished
-        .chunks(options.max_array_size.min(unfinished.len().max(1)))
+    for (k, chunk) in units
+        .chunks(options.max_array_size.min(units.len().max(1)))
         .enumerate()
     {
-        let runs: Vec<usize> = chunk.iter().map(|r| r.index).collect();
+        let runs: Vec<usize> = chunk.to_vec();
         let path = slurm.join(format!("array-{k}.sbatch"));
         let text = script(&dir, &logs, exe, &name, &runs, cpus, options);
         super::write_atomically(&path, &text)?;
@@ -165,12 +176,12 @@ fn script(
     format!(
         r#"#!/bin/bash
 # Written by `dhrl sweep slurm` for the sweep in {dir}:
-# array task i runs the manifest's run ${{runs[i]}} through `dhrl sweep run-one`.
+# array task i runs {what} ${{runs[i]}} through `dhrl sweep run-one`.
 {sbatch}
 runs=({runs_list})
 index=${{runs[$SLURM_ARRAY_TASK_ID]}}
-echo "dhrl: array task $SLURM_ARRAY_TASK_ID (restart ${{SLURM_RESTART_COUNT:-0}}) runs manifest index $index on $(hostname) at $(date -Is)"
-{exe} sweep run-one {dir_quoted} --index "$index" &
+echo "dhrl: array task $SLURM_ARRAY_TASK_ID (restart ${{SLURM_RESTART_COUNT:-0}}) runs {what} $index on $(hostname) at $(date -Is)"
+{exe} sweep run-one {dir_quoted} {unit} "$index" &
 run=$!
 # Slurm's SIGTERM (a preemption, `scontrol requeue`, the time limit) reaches every process of
 # the job, the run included, which checkpoints and exits: this shell only waits for it.
@@ -196,6 +207,16 @@ exit "$status"
         exe = shell_quote(&exe.display().to_string()),
         dir_quoted = shell_quote(&dir.display().to_string()),
         interrupted = EXIT_INTERRUPTED,
+        what = if options.stack <= 1 {
+            "the manifest's run".to_string()
+        } else {
+            "stack group".to_string()
+        },
+        unit = if options.stack <= 1 {
+            "--index".to_string()
+        } else {
+            format!("--stack {} --group", options.stack)
+        },
     )
 }
 

@@ -23,8 +23,8 @@ pub use eval::{EvalResult, evaluate};
 #[cfg(feature = "cli")]
 pub use run::stop_on_signals;
 pub use run::{
-    FAILED, STACK, SavedRun, Start, TrainSummary, evaluate_saved, learner_pool, load_saved,
-    stack_member, stack_seeds, train, train_seeds, train_stack,
+    FAILED, STACK, SavedRun, Start, TrainSummary, checkpoint_step, evaluate_saved, learner_pool,
+    load_saved, stack_member, stack_seeds, train, train_seeds, train_stack,
 };
 
 use crate::delay::{DelayError, ReplayError};

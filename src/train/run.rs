@@ -226,6 +226,11 @@ fn prepare(
         Start::Resume => {
             let saved = TrainConfig::from_toml_file(&run.join("config.toml"))?;
             lock = lock_run(run)?;
+            // A run that failed in a stack and is tried again.
+            let failed = run.join(FAILED);
+            if failed.exists() {
+                std::fs::remove_file(&failed).map_err(io_error(&failed))?;
+            }
             // 0: no --steps given.
             if config.steps != 0 && config.steps < saved.steps {
                 return Err(TrainError::Config(ConfigError::Invalid {
@@ -973,6 +978,11 @@ fn load_checkpoint(
             _ => std::thread::sleep(std::time::Duration::from_millis(200)),
         }
     }
+}
+
+/// The environment steps of `run`'s latest checkpoint; `None` without one.
+pub fn checkpoint_step(run: &Path) -> Option<u64> {
+    checkpoint_steps(run).ok().map(|(_, steps)| steps)
 }
 
 /// `run`'s latest checkpoint folder and its environment steps.
