@@ -477,6 +477,13 @@ fn bad_seed_lists_are_refused_saying_what_is_accepted() {
     let out = common::dhrl(&["train", "--seeds", "0,1", "--seed", "3"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));
+    let out = common::dhrl(&["train", "--runs-per-pass", "2", "--steps", "10"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--runs-per-pass") && stderr.contains("with --seeds"),
+        "{stderr}"
+    );
 }
 
 /// A checkpoint written before the networks were stacked (the checked-in deployment run,

@@ -261,6 +261,14 @@ impl TrainArgs {
                 },
             });
         }
+        if self.runs_per_pass.is_some() && self.seeds.is_none() {
+            return Err(ConfigError::Invalid {
+                what: "--runs-per-pass",
+                accepted: "given with --seeds (a stack); one run is one run per pass",
+                value: "given without --seeds".into(),
+            }
+            .into());
+        }
         let config = self.config()?;
         let delay = config.validate()?;
         let run = self.out.clone().unwrap_or_else(|| {
