@@ -126,9 +126,7 @@ pub fn load_stack<M: Module>(
     name: &str,
     module: M,
 ) -> Result<M, LearnError> {
-    let what = slices
-        .first()
-        .map_or_else(|| PathBuf::from(name), |dir| dir.path(name));
+    let what = first_path(slices, name);
     let record = stacked_bytes(slices, name)
         .and_then(|bytes| ModuleRecord::from_bytes(bytes).map_err(|e| load_error(&what, e)))?;
     module
@@ -142,12 +140,17 @@ pub fn load_optimizer_stack(
     name: &str,
     optimizer: ModuleOptimizer,
 ) -> Result<ModuleOptimizer, LearnError> {
-    let what = slices
-        .first()
-        .map_or_else(|| PathBuf::from(name), |dir| dir.path(name));
+    let what = first_path(slices, name);
     optimizer
         .from_bytes(stacked_bytes(slices, name)?)
         .map_err(|e| load_error(&what, e))
+}
+
+/// `name` in the first slice's folder: what errors about a stacked record name.
+fn first_path(slices: &[CheckpointDir<'_>], name: &str) -> PathBuf {
+    slices
+        .first()
+        .map_or_else(|| PathBuf::from(name), |dir| dir.path(name))
 }
 
 /// The slices' records of `name`, read whole and stacked.
@@ -156,9 +159,7 @@ fn stacked_bytes(slices: &[CheckpointDir<'_>], name: &str) -> Result<Bytes, Lear
         .iter()
         .map(|dir| read_whole(&dir.path(name)))
         .collect::<Result<Vec<_>, _>>()?;
-    let what = slices
-        .first()
-        .map_or_else(|| PathBuf::from(name), |dir| dir.path(name));
+    let what = first_path(slices, name);
     super::stack_packs(parts).map_err(|e| load_error(&what, e))
 }
 

@@ -68,21 +68,25 @@ pub fn available(run: &Path) -> Result<Vec<(u64, PathBuf)>, TrainError> {
     let mut found = Vec::new();
     for name in [CHECKPOINT, PREVIOUS] {
         let dir = run.join(name);
-        let state = dir.join("state.json");
-        if state.is_file() {
-            let value: serde_json::Value = read_json(&state)?;
-            let steps = value["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
-                path: state.display().to_string(),
-                message: "no env_steps in the checkpoint's state".into(),
-            })?;
-            found.push((steps, dir));
+        if dir.join("state.json").is_file() {
+            found.push((env_steps(&dir)?, dir));
         }
     }
     Ok(found)
 }
 
+/// The environment steps of the checkpoint in `dir` (its `state.json`).
+pub fn env_steps(dir: &Path) -> Result<u64, TrainError> {
+    let state = dir.join("state.json");
+    let value: serde_json::Value = read_json(&state)?;
+    value["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
+        path: state.display().to_string(),
+        message: "no env_steps in the checkpoint's state".into(),
+    })
+}
+
 /// The checkpoint to resume from: the current one, or the previous one when a crash hit
-/// between the two renames of [`commit`].
+/// between the renames of [`commit_all`].
 pub fn latest(run: &Path) -> Option<PathBuf> {
     [CHECKPOINT, PREVIOUS]
         .iter()

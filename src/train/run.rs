@@ -989,11 +989,7 @@ pub fn checkpoint_step(run: &Path) -> Option<u64> {
 fn checkpoint_steps(run: &Path) -> Result<(PathBuf, u64), TrainError> {
     let dir = checkpoint::latest(run)
         .ok_or_else(|| TrainError::NoCheckpoint(run.display().to_string()))?;
-    let state: serde_json::Value = read_json(&dir.join("state.json"))?;
-    let env_steps = state["env_steps"].as_u64().ok_or_else(|| TrainError::Io {
-        path: dir.join("state.json").display().to_string(),
-        message: "no env_steps in the checkpoint's state".into(),
-    })?;
+    let env_steps = checkpoint::env_steps(&dir)?;
     Ok((dir, env_steps))
 }
 
