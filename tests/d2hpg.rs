@@ -24,9 +24,9 @@ fn devices() -> Devices {
     Devices::new(LearnDevice::Cpu).unwrap()
 }
 
-/// `[K, B, A]` actions: K samples of a batch of B states.
-fn actions(values: Vec<f32>, k: usize, b: usize, a: usize, device: &Device) -> Tensor<3> {
-    Tensor::from_data(TensorData::new(values, [k, b, a]), device)
+/// `[K, 1, B, A]` actions: K samples of a batch of B states, of one run.
+fn actions(values: Vec<f32>, k: usize, b: usize, a: usize, device: &Device) -> Tensor<4> {
+    Tensor::from_data(TensorData::new(values, [k, 1, b, a]), device)
 }
 
 #[test]
@@ -175,7 +175,7 @@ fn lifting_moves_the_regular_policy_and_leaves_the_delay_free_learner_alone() {
     let (spec, hyper, d, seed) = (spec(3), SacConfig::default(), devices(), 21);
     let (obs, aug) = (spec.obs_dim, spec.augmented_dim());
     let lifted = |weight: f64| {
-        let mut agent = D2hpg::new(Regular::Bpql, &lifting(weight, 4), &spec, &d, seed);
+        let mut agent = D2hpg::new(Regular::Bpql, &lifting(weight, 4), &spec, &d, &[seed]);
         for step in 0..5 {
             update(&mut agent, &batch(&spec, 32, 200 + step));
         }
@@ -218,7 +218,7 @@ fn lifting_moves_the_regular_policy_and_leaves_the_delay_free_learner_alone() {
 fn d2hpg_without_lifting_is_bpql_beside_an_independent_delay_free_sac() {
     let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let (spec, hyper, d, seed) = (spec(3), SacConfig::default(), devices(), 11);
-    let mut d2hpg = D2hpg::new(Regular::Bpql, &lifting(0.0, 4), &spec, &d, seed);
+    let mut d2hpg = D2hpg::new(Regular::Bpql, &lifting(0.0, 4), &spec, &d, &[seed]);
     let mut bpql = Bpql::new(&spec, &hyper, &d, seed);
     let mut delay_free = SacAgent::new(
         InputView::TrueState,
@@ -254,7 +254,7 @@ fn d2hpg_without_lifting_is_bpql_beside_an_independent_delay_free_sac() {
     );
 
     // With lifting on, the regular policy moves away from BPQL's.
-    let mut lifted = D2hpg::new(Regular::Bpql, &lifting(10.0, 4), &spec, &d, seed);
+    let mut lifted = D2hpg::new(Regular::Bpql, &lifting(10.0, 4), &spec, &d, &[seed]);
     for step in 0..4 {
         update(&mut lifted, &batch(&spec, 32, 100 + step));
     }
@@ -272,7 +272,7 @@ fn d2hpg_naive_moves_its_regular_policy_toward_the_delay_free_one() {
     // lifting loss of the one with λ = 0 (a regular policy left where it started) is the
     // yardstick for how far the lifted one has closed in.
     let lifting_after = |weight: f64| {
-        let mut agent = D2hpg::new(Regular::LiftingOnly, &lifting(weight, 8), &spec, &d, 5);
+        let mut agent = D2hpg::new(Regular::LiftingOnly, &lifting(weight, 8), &spec, &d, &[5]);
         let b = batch(&spec, 64, 9);
         let mut stats = update(&mut agent, &b);
         for _ in 0..300 {

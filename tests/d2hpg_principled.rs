@@ -7,7 +7,6 @@ mod common;
 use std::sync::Mutex;
 
 use burn::module::Param;
-use burn::nn::Linear;
 use burn::prelude::*;
 use common::{parameters, small_spec as spec, update};
 use dhrl::algos::{
@@ -15,7 +14,9 @@ use dhrl::algos::{
     Homomorphism, LaxMetric, MetricReduction, RegularCritic, SacConfig, TransitionLoss,
     abstract_model_loss, gaussian_w2, lax_loss, random_batch,
 };
-use dhrl::learn::{Devices, LearnDevice, Mlp, TransitionTensors, lifting_loss, matrix, to_vec};
+use dhrl::learn::{
+    Devices, LearnDevice, Mlp, StackedLinear, TransitionTensors, lifting_loss, matrix, to_vec,
+};
 
 /// burn's generator is process-wide: networks built by concurrent tests would interleave draws.
 static BUILD: Mutex<()> = Mutex::new(());
@@ -31,8 +32,9 @@ fn close(found: f32, expected: f64, what: &str) {
     );
 }
 
-fn m(values: &[f32], rows: usize, device: &Device) -> Tensor<2> {
-    matrix(values.to_vec(), rows, values.len() / rows, device)
+/// One run's `[1, rows, ·]`.
+fn m(values: &[f32], rows: usize, device: &Device) -> Tensor<3> {
+    matrix(values.to_vec(), rows, values.len() / rows, device).unsqueeze_dim(0)
 }
 
 #[test]
@@ -68,7 +70,7 @@ fn metric(reduction: MetricReduction, distance: Distance, stop: bool) -> LaxMetr
 /// A two-sample batch, shift 1: the pairs (0, 1) and (1, 0), which give the same term.
 /// x̄_0 = (0, 0), x̄_1 = (1, −2); r̃ = (1, 0.5); P̄_0 = N((0, 0), diag(1, 1)),
 /// P̄_1 = N((3, 0), diag(1, 25)); γ = 0.9.
-fn two_pairs(device: &Device) -> (Tensor<2>, Tensor<2>, (Tensor<2>, Tensor<2>)) {
+fn two_pairs(device: &Device) -> (Tensor<3>, Tensor<3>, (Tensor<3>, Tensor<3>)) {
     (
         m(&[0.0, 0.0, 1.0, -2.0], 2, device),
         m(&[1.0, 0.5], 2, device),
@@ -88,7 +90,7 @@ fn lax_loss_matches_hand_values_on_two_pairs() {
             states.clone(),
             rewards.clone(),
             transition.clone(),
-            1,
+            &[1],
             0.9,
             &metric,
         ))[0]
@@ -132,7 +134,7 @@ fn stopping_the_transition_gradient_leaves_the_abstract_transition_out_of_l_lax(
             Tensor::from_inner(states.clone()),
             Tensor::from_inner(rewards.clone()),
             (tracked_mean.clone(), tracked_std.clone()),
-            1,
+            &[1],
             0.9,
             &metric(MetricReduction::Sum, Distance::L1, stop),
         );
@@ -207,16 +209,16 @@ fn lifting_loss_through_a_linear_action_map_matches_hand_values() {
     // x of one entry, one action: g_ω(x, a) = tanh(0.5·x + 1.0·a + 0.1), one linear layer.
     let mut h = Homomorphism::new((1, 1), (2, 1), &[4], &d.train);
     h.action_map = Mlp {
-        layers: vec![Linear {
-            weight: Param::from_data([[0.5f32], [1.0]], &d.train),
-            bias: Some(Param::from_data([0.1f32], &d.train)),
+        layers: vec![StackedLinear {
+            weight: Param::from_data([[[0.5f32], [1.0]]], &d.train),
+            bias: Param::from_data([[0.1f32]], &d.train),
         }],
     };
     // Two states x = (1, −1), K = 2 regular actions each: {0.2, 0.6} at the first, {−0.4, 0}
-    // at the second, laid out sample by sample ([K, B, A]); the abstract policy's {0.5, 0.5}
-    // and {0.1, −0.1}.
+    // at the second, laid out sample by sample ([K, S, B, A], one run); the abstract policy's
+    // {0.5, 0.5} and {0.1, −0.1}.
     let x = m(&[1.0, -1.0], 2, &d.plain);
-    let three = |v: Vec<f32>| Tensor::<3>::from_data(TensorData::new(v, [2, 2, 1]), &d.plain);
+    let three = |v: Vec<f32>| Tensor::<4>::from_data(TensorData::new(v, [2, 1, 2, 1]), &d.plain);
     let lifted = h
         .valid()
         .abstract_actions_k(x, three(vec![0.2, -0.4, 0.6, 0.0]));
@@ -292,12 +294,14 @@ fn update_logs_l_lax_and_l_h_of_the_batch_it_was_given() {
             transition_loss,
             ..config(1.0)
         };
-        let mut agent = D2hpgPrincipled::new(&config, &spec, &d, 8);
+        let mut agent = D2hpgPrincipled::new(&config, &spec, &d, &[8]);
         let h = agent.homomorphism.valid();
-        let mut noise = agent.model_noise.clone();
+        let mut noise = agent.model_noise[0].clone();
         let t = TransitionTensors::new(&b, &d.plain);
         let shift = 1 + noise.below(b.len() - 1);
-        let eps = noise.normal(b.len(), config.latent_dim, &d.plain);
+        let eps = noise
+            .normal(b.len(), config.latent_dim, &d.plain)
+            .unsqueeze_dim(0);
         let state = h.abstract_state(t.augmented.clone());
         let action = h.abstract_action(t.augmented.clone(), t.action.clone());
         let transition = h.transition(state.clone(), action.clone());
@@ -305,7 +309,7 @@ fn update_logs_l_lax_and_l_h_of_the_batch_it_was_given() {
             state.clone(),
             t.reward.clone(),
             transition.clone(),
-            shift,
+            &[shift],
             config.sac.gamma,
             &LaxMetric::of(&config),
         ))[0];
@@ -340,7 +344,7 @@ fn each_loss_moves_only_its_own_parameters() {
     let (spec, d) = (spec(3), devices());
     let b = random_batch(&spec, 32, 4);
     let after_one = |weight: f64| {
-        let mut agent = D2hpgPrincipled::new(&config(weight), &spec, &d, 8);
+        let mut agent = D2hpgPrincipled::new(&config(weight), &spec, &d, &[8]);
         let before = parts(&agent);
         update(&mut agent, &b);
         (before, parts(&agent))
@@ -369,7 +373,7 @@ fn every_choice_changes_the_part_it_concerns() {
     let (spec, d) = (spec(3), devices());
     let b = random_batch(&spec, 32, 6);
     let after_one = |config: &D2hpgPrincipledConfig| {
-        let mut agent = D2hpgPrincipled::new(config, &spec, &d, 2);
+        let mut agent = D2hpgPrincipled::new(config, &spec, &d, &[2]);
         let initial_alpha = parameters(&agent.regular.temperature);
         let stats = update(&mut agent, &b);
         assert!(
@@ -498,7 +502,7 @@ fn every_choice_changes_the_part_it_concerns() {
 fn without_lifting_the_regular_learner_is_bpql() {
     let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let (spec, d, seed) = (spec(3), devices(), 13);
-    let mut principled = D2hpgPrincipled::new(&config(0.0), &spec, &d, seed);
+    let mut principled = D2hpgPrincipled::new(&config(0.0), &spec, &d, &[seed]);
     let mut bpql = Bpql::new(&spec, &SacConfig::default(), &d, seed);
     let mut on_x = D2hpgPrincipled::new(
         &D2hpgPrincipledConfig {
@@ -507,7 +511,7 @@ fn without_lifting_the_regular_learner_is_bpql() {
         },
         &spec,
         &d,
-        seed,
+        &[seed],
     );
     for step in 0..4 {
         let b = random_batch(&spec, 32, 300 + step);

@@ -213,11 +213,11 @@ fn mlp_is_linear_layers_with_relu_between() {
     let mlp = MlpConfig::new(3, &[4], 2).init(&d.plain);
     assert_eq!(mlp.layers.len(), 2);
     let weights = |k: usize| to_vec(mlp.layers[k].weight.val());
-    let bias = |k: usize| to_vec(mlp.layers[k].bias.as_ref().unwrap().val());
+    let bias = |k: usize| to_vec(mlp.layers[k].bias.val());
     let (w1, b1, w2, b2) = (weights(0), bias(0), weights(1), bias(1));
     assert_eq!((w1.len(), b1.len(), w2.len(), b2.len()), (12, 4, 8, 2));
     let x = [0.5f32, -1.0, 2.0, -0.3, 0.8, 0.1];
-    let y = to_vec(mlp.forward(matrix(x.to_vec(), 2, 3, &d.plain)));
+    let y = to_vec(mlp.forward(matrix(x.to_vec(), 2, 3, &d.plain).unsqueeze_dim(0)));
     for row in 0..2 {
         let h: Vec<f64> = (0..4)
             .map(|j| {

@@ -11,6 +11,7 @@ use burn::prelude::*;
 use burn::tensor::activation::relu;
 use common::{parameters, small_spec};
 use dhrl::algos::{ActMode, AgentSpec, SacBatch, SacConfig, SacLearner, SacStats, random_batch};
+use dhrl::delay::Transitions;
 use dhrl::learn::{
     Devices, LearnDevice, StackedLinear, TransitionTensors, materialize, stack, to_vec,
 };
@@ -94,18 +95,19 @@ fn stacked_layers_compute_each_runs_solo_values_and_gradients_bit_for_bit() {
     }
 }
 
-/// Run `run`'s batch: SAC on the true state.
-fn solo_batch(spec: &AgentSpec, seed: u64, d: &Devices) -> SacBatch {
-    let t = TransitionTensors::new(&random_batch(spec, 32, seed), &d.plain);
+/// 32 random transitions of each of `seeds`.
+fn transitions(spec: &AgentSpec, seeds: impl Iterator<Item = u64>) -> Vec<Transitions> {
+    seeds.map(|seed| random_batch(spec, 32, seed)).collect()
+}
+
+/// The runs' batches for SAC on the true state.
+fn on_state(batches: &[Transitions], d: &Devices) -> SacBatch {
+    let t = TransitionTensors::stacked(batches, &d.plain);
     SacBatch::new(
         &t,
         (t.state.clone(), t.next_state.clone()),
         (t.state.clone(), t.next_state.clone()),
     )
-}
-
-fn stack_batches(batches: &[SacBatch]) -> SacBatch {
-    SacBatch::stack(batches.to_vec())
 }
 
 fn learner_parameters(learner: &SacLearner) -> Vec<Vec<f32>> {
@@ -167,15 +169,12 @@ fn a_stack_of_three_sac_learners_is_three_solo_learners_bit_for_bit() {
         "the seeds draw different networks"
     );
     for update in 0..updates {
-        let batches: Vec<SacBatch> = seeds
-            .iter()
-            .map(|&seed| solo_batch(&spec, seed * 100 + update, &d))
-            .collect();
-        let stats = stack_learner.update(&stack_batches(&batches));
+        let batches = transitions(&spec, seeds.iter().map(|&seed| seed * 100 + update));
+        let stats = stack_learner.update(&on_state(&batches, &d));
         let solo_stats: Vec<SacStats> = solos
             .iter_mut()
             .zip(&batches)
-            .map(|(learner, batch)| learner.update(batch)[0])
+            .map(|(learner, batch)| learner.update(&on_state(std::slice::from_ref(batch), &d))[0])
             .collect();
         assert_eq!(stats, solo_stats, "update {update}'s statistics");
     }
@@ -214,14 +213,9 @@ fn each_run_of_a_stack_is_saved_as_a_solo_run_and_the_stack_resumes_exactly() {
     let hyper = SacConfig::default();
     let seeds = [1u64, 2];
     let obs = spec.obs_dim;
-    let batches = |update: u64| -> Vec<SacBatch> {
-        seeds
-            .iter()
-            .map(|&seed| solo_batch(&spec, seed * 10 + update, &d))
-            .collect()
-    };
+    let batches = |update: u64| transitions(&spec, seeds.iter().map(|&seed| seed * 10 + update));
     let mut original = SacLearner::stacked(obs, obs, &spec, &hyper, &d, &seeds);
-    original.update(&stack_batches(&batches(0)));
+    original.update(&on_state(&batches(0), &d));
     let folders = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
     let paths: Vec<&std::path::Path> = folders.iter().map(|f| f.path()).collect();
     original.save(&paths, "").unwrap();
@@ -247,10 +241,11 @@ fn each_run_of_a_stack_is_saved_as_a_solo_run_and_the_stack_resumes_exactly() {
         );
     }
     let next = batches(1);
-    let after = original.update(&stack_batches(&next));
-    assert_eq!(resumed.update(&stack_batches(&next)), after);
+    let after = original.update(&on_state(&next, &d));
+    assert_eq!(resumed.update(&on_state(&next, &d)), after);
     for (i, solo) in solos.iter_mut().enumerate() {
-        assert_eq!(solo.update(&next[i])[0], after[i], "run {i} resumed alone");
+        let alone = solo.update(&on_state(std::slice::from_ref(&next[i]), &d));
+        assert_eq!(alone[0], after[i], "run {i} resumed alone");
     }
 }
 
@@ -326,7 +321,9 @@ fn each_run_of_a_stack_logs_exactly_what_its_solo_run_logs() {
         ("naive-sac", "2", "0"),
         ("bpql", "2", "3"),
         ("d2hpg", "2", "0"),
-        ("delayed-sac", "2", "0"),
+        ("d2hpg-naive", "2", "3"),
+        ("d2hpg-principled", "2", "0"),
+        ("delayed-sac", "2", "3"),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let stack = dir.path().join("stack");

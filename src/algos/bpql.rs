@@ -127,9 +127,9 @@ impl Agent for Bpql {
     }
 }
 
-/// BPQL's split of a batch: the actor on `(x, x')`, the beta critic on `(s, s')`.
-pub(super) fn beta_batch(batch: &Transitions, device: &Device) -> SacBatch {
-    let t = TransitionTensors::new(batch, device);
+/// BPQL's split of the runs' batches: the actor on `(x, x')`, the beta critic on `(s, s')`.
+pub(super) fn beta_batch(batches: &[Transitions], device: &Device) -> SacBatch {
+    let t = TransitionTensors::stacked(batches, device);
     SacBatch::new(
         &t,
         (t.augmented.clone(), t.next_augmented.clone()),

@@ -65,6 +65,11 @@ impl<'a> UpdateContext<'a> {
         self.sample(self.batch_size)
     }
 
+    /// A batch of each run of a stack, run `i`'s from `contexts[i]`.
+    pub fn batches(contexts: &mut [UpdateContext<'_>]) -> Result<Vec<Transitions>, ReplayError> {
+        contexts.iter_mut().map(UpdateContext::batch).collect()
+    }
+
     /// `n` transitions drawn uniformly from the complete ones (with replacement).
     pub fn sample(&mut self, n: usize) -> Result<Transitions, ReplayError> {
         match &mut self.source {

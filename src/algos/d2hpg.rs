@@ -28,12 +28,10 @@ use super::agent::{
 };
 use super::bpql::{beta_batch, bpql_learner};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, SacBatch, SacLearner};
+use super::sac::{Config as SacConfig, SacBatch, SacLearner, per_run};
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
-use crate::learn::{
-    CheckpointDir, Devices, LearnError, Noise, lifting_loss, one_run, squashed_samples_k,
-};
+use crate::learn::{CheckpointDir, Devices, LearnError, Noise, lifting_loss, squashed_samples_k};
 use crate::seeds;
 
 crate::algo_config! {
@@ -89,7 +87,7 @@ const D2HPG_INFO: AlgoInfo = AlgoInfo {
     undelayed_only: false,
     delayed_only: false,
     learner_threads: 2,
-    stacked_learner: false,
+    stacked_learner: true,
     label_fields: &[("λ", "lifting_weight"), ("K", "lifting_samples")],
 };
 
@@ -101,7 +99,11 @@ impl AlgoConfig for Config {
     }
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        Box::new(D2hpg::new(Regular::Bpql, self, spec, devices, seed))
+        self.build_stack(spec, devices, &[seed])
+    }
+
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        Box::new(D2hpg::new(Regular::Bpql, self, spec, devices, seeds))
     }
 }
 
@@ -130,12 +132,16 @@ impl AlgoConfig for NaiveConfig {
     }
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        self.build_stack(spec, devices, &[seed])
+    }
+
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
         Box::new(D2hpg::new(
             Regular::LiftingOnly,
             &self.0,
             spec,
             devices,
-            seed,
+            seeds,
         ))
     }
 }
@@ -155,6 +161,8 @@ const FREE_STATS: [&str; 3] = ["free_critic_loss", "free_actor_loss", "free_alph
 const REGULAR_STATS: [&str; 3] = ["critic_loss", "actor_loss", "alpha"];
 const LIFTING_STAT: &str = "lifting_loss";
 
+/// D2HPG for a stack of runs (a solo run is S = 1): both learners stacked, a lifting noise
+/// stream per run.
 pub struct D2hpg {
     spec: AgentSpec,
     regular_kind: Regular,
@@ -165,40 +173,52 @@ pub struct D2hpg {
     regular: SacLearner,
     /// SAC on the true state: the abstract policy and critic.
     delay_free: SacLearner,
-    lifting_noise: Noise,
+    lifting_noise: Vec<Noise>,
 }
 
 impl D2hpg {
+    /// The runs of `seeds`.
     pub fn new(
         regular_kind: Regular,
         config: &Config,
         spec: &AgentSpec,
         devices: &Devices,
-        seed: u64,
+        seeds: &[u64],
     ) -> D2hpg {
+        let free_seeds: Vec<u64> = seeds
+            .iter()
+            .map(|&s| seeds::delay_free_learner(s))
+            .collect();
         D2hpg {
             spec: spec.clone(),
             regular_kind,
             lifting_weight: config.lifting_weight,
             lifting_samples: config.lifting_samples,
-            regular: bpql_learner(spec, &config.sac, devices, &[seed]),
-            delay_free: SacLearner::new(
+            regular: bpql_learner(spec, &config.sac, devices, seeds),
+            delay_free: SacLearner::stacked(
                 spec.obs_dim,
                 spec.obs_dim,
                 spec,
                 &config.sac,
                 devices,
-                seeds::delay_free_learner(seed),
+                &free_seeds,
             ),
-            lifting_noise: Noise::new(seeds::lifting_noise(seed)),
+            lifting_noise: seeds
+                .iter()
+                .map(|&seed| Noise::new(seeds::lifting_noise(seed)))
+                .collect(),
         }
     }
 }
 
 impl Agent for D2hpg {
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+    fn runs(&self) -> usize {
+        self.regular.runs()
+    }
+
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         self.regular
-            .act_run(0, augmented, rows, self.spec.augmented_dim(), mode)
+            .act_run(run, augmented, rows, self.spec.augmented_dim(), mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {
@@ -228,22 +248,28 @@ impl Agent for D2hpg {
             .collect()
     }
 
-    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        let batch = &ctx.batch()?;
+    fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<Vec<Stats>, ReplayError> {
         let plain = self.regular.devices.plain.clone();
-        let regular_batch = beta_batch(batch, &plain);
+        let regular_batch = beta_batch(&UpdateContext::batches(contexts)?, &plain);
         // The delay-free learner: actor and critics on the true state.
         let free_batch = SacBatch {
             actor_input: regular_batch.critic_input.clone(),
             next_actor_input: regular_batch.next_critic_input.clone(),
             ..regular_batch.clone()
         };
-        let (rows, k, act) = (batch.len(), self.lifting_samples, self.spec.act_dim);
+        let (rows, k, act) = (
+            regular_batch.rows(),
+            self.lifting_samples,
+            self.spec.act_dim,
+        );
         let with_bpql = self.regular_kind == Regular::Bpql;
         let (regular, delay_free) = (&mut self.regular, &mut self.delay_free);
-        let (alpha, free_alpha) = (
-            regular.temperature.alphas()[0],
-            delay_free.temperature.alphas()[0],
+        let (alphas, free_alphas) = (
+            regular.temperature.alphas(),
+            delay_free.temperature.alphas(),
         );
 
         // 1. The critics of both learners (the pseudo-code's joint critic step): the beta
@@ -252,44 +278,43 @@ impl Agent for D2hpg {
         //    learners share no parameters and draw from their own noise streams, so rayon runs
         //    them side by side when it has two threads, with the same numbers as one after
         //    the other.
-        let ((critic_loss, regular_distribution), (free_critic_loss, free_distribution)) =
+        let ((critic_losses, regular_distribution), (free_critic_losses, free_distribution)) =
             rayon::join(
                 || {
-                    let loss = with_bpql.then(|| regular.update_critics(&regular_batch));
-                    (loss, regular.distribution(&regular_batch))
+                    let losses = with_bpql.then(|| regular.update_critics(&regular_batch));
+                    (losses, regular.distribution(&regular_batch))
                 },
                 || {
-                    let loss = delay_free.update_critics(&free_batch);
-                    (loss, delay_free.distribution(&free_batch))
+                    let losses = delay_free.update_critics(&free_batch);
+                    (losses, delay_free.distribution(&free_batch))
                 },
             );
 
         // 2. The delay-free policy's squashed actions at s, K per state, from its distribution
         //    before this update, held fixed. The regular policy's K samples reuse the same ε
         //    (common random numbers): the two sets of moments are then equal exactly when the
-        //    two distributions are. L_lift (Eq. 4) is logged unweighted.
-        let eps = self.lifting_noise.normal3(k, rows, act, &plain);
-        let (free_mean, free_log_std) = one_run(free_distribution.clone());
+        //    two distributions are. L_lift (Eq. 4) is logged unweighted, per run.
+        let eps = Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, act, &plain);
+        let (free_mean, free_log_std) = free_distribution.clone();
         let free_actions = squashed_samples_k(
             (free_mean.inner(), free_log_std.inner()),
             eps.clone(),
             &delay_free.scale,
         );
-        let regular_actions =
-            squashed_samples_k(one_run(regular_distribution.clone()), eps, &regular.scale);
+        let regular_actions = squashed_samples_k(regular_distribution.clone(), eps, &regular.scale);
         let lifting = lifting_loss(regular_actions, free_actions);
-        let lifting_value = f64::from(lifting.clone().inner().into_scalar::<f32>());
-        let lift = lifting.mul_scalar(self.lifting_weight);
+        let lifting_values = per_run(lifting.clone());
+        let lift = lifting.mul_scalar(self.lifting_weight).sum();
 
         // 3. The policies, side by side again: `d2hpg` takes BPQL's actor step with λ·L_lift
         //    in its loss, `d2hpg-naive` steps on λ·L_lift alone; the delay-free learner takes
         //    its SAC actor step; then each its temperature and targets.
-        let (actor_loss, (free_actor_loss, _)) = rayon::join(
+        let (actor_losses, (free_actor_losses, _)) = rayon::join(
             || {
                 if with_bpql {
-                    let (actor_loss, _) =
+                    let (actor_losses, _) =
                         regular.update_policy(&regular_batch, regular_distribution, Some(lift));
-                    Some(actor_loss)
+                    Some(actor_losses)
                 } else {
                     regular.update_actor_by(lift);
                     None
@@ -298,31 +323,45 @@ impl Agent for D2hpg {
             || delay_free.update_policy(&free_batch, free_distribution, None),
         );
 
-        let mut stats: Stats = FREE_STATS
-            .into_iter()
-            .zip([free_critic_loss[0], free_actor_loss[0], free_alpha])
-            .collect();
-        if let (Some(critic_loss), Some(actor_loss)) = (critic_loss, actor_loss) {
-            stats.extend(
-                REGULAR_STATS
+        Ok((0..self.regular.runs())
+            .map(|run| {
+                let mut stats: Stats = FREE_STATS
                     .into_iter()
-                    .zip([critic_loss[0], actor_loss[0], alpha]),
-            );
+                    .zip([
+                        free_critic_losses[run],
+                        free_actor_losses[run],
+                        free_alphas[run],
+                    ])
+                    .collect();
+                if let (Some(critic_losses), Some(actor_losses)) = (&critic_losses, &actor_losses) {
+                    stats.extend(REGULAR_STATS.into_iter().zip([
+                        critic_losses[run],
+                        actor_losses[run],
+                        alphas[run],
+                    ]));
+                }
+                stats.push((LIFTING_STAT, lifting_values[run]));
+                stats
+            })
+            .collect())
+    }
+
+    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.regular.save(dirs, "regular_")?;
+        self.delay_free.save(dirs, "delay_free_")?;
+        for (dir, noise) in dirs.iter().zip(&self.lifting_noise) {
+            CheckpointDir::new(dir).save_json("lifting_noise.json", noise)?;
         }
-        stats.push((LIFTING_STAT, lifting_value));
-        Ok(stats)
+        Ok(())
     }
 
-    fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.regular.save(&[dir], "regular_")?;
-        self.delay_free.save(&[dir], "delay_free_")?;
-        CheckpointDir::new(dir).save_json("lifting_noise.json", &self.lifting_noise)
-    }
-
-    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.regular.load(&[dir], "regular_")?;
-        self.delay_free.load(&[dir], "delay_free_")?;
-        self.lifting_noise = CheckpointDir::new(dir).load_json("lifting_noise.json")?;
+    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.regular.load(dirs, "regular_")?;
+        self.delay_free.load(dirs, "delay_free_")?;
+        self.lifting_noise = dirs
+            .iter()
+            .map(|dir| CheckpointDir::new(dir).load_json("lifting_noise.json"))
+            .collect::<Result<_, _>>()?;
         Ok(())
     }
 }

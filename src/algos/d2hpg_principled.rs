@@ -58,12 +58,12 @@ use super::agent::{
 };
 use super::context::UpdateContext;
 use super::d2hpg::check_lifting;
-use super::sac::{Config as SacConfig, SacBatch, SacLearner};
+use super::sac::{Config as SacConfig, SacBatch, SacLearner, per_run};
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
-    CheckpointDir, Devices, LearnError, Mlp, MlpConfig, Noise, TransitionTensors, adam,
-    lifting_loss, materialize, one_run, squashed_samples_k,
+    CheckpointDir, Devices, LearnError, Mlp, MlpConfig, Noise, TransitionTensors, adam, batch_mean,
+    lifting_loss, load_optimizer_stack, load_stack, squashed_samples_k, stack,
 };
 use crate::seeds;
 
@@ -175,7 +175,7 @@ impl AlgoConfig for Config {
         undelayed_only: false,
         delayed_only: false,
         learner_threads: 2,
-        stacked_learner: false,
+        stacked_learner: true,
         label_fields: &[
             ("λ", "lifting_weight"),
             ("d", "latent_dim"),
@@ -213,7 +213,11 @@ impl AlgoConfig for Config {
     }
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        Box::new(D2hpgPrincipled::new(self, spec, devices, seed))
+        self.build_stack(spec, devices, &[seed])
+    }
+
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        Box::new(D2hpgPrincipled::new(self, spec, devices, seeds))
     }
 }
 
@@ -224,7 +228,8 @@ const SIGMA_MAX: f64 = 10.0;
 /// Inside W₂'s square root, so that it stays differentiable where two Gaussians coincide.
 const W2_FLOOR: f64 = 1e-12;
 
-/// The homomorphism and the abstract MDP's model: every network line 23 trains.
+/// The homomorphism and the abstract MDP's model: every network line 23 trains, stacked (one
+/// slice per run; inputs `[S, B, ·]`).
 #[derive(Module, Debug)]
 pub struct Homomorphism {
     /// `f_ξ: x → x̄`.
@@ -238,63 +243,67 @@ pub struct Homomorphism {
 }
 
 impl Homomorphism {
-    /// The four networks for augmented states of width `x_dim` and actions of `act_dim`, with
-    /// abstract states of `latent` and abstract actions of `abstract_act` entries.
+    /// One run's four networks for augmented states of width `x_dim` and actions of
+    /// `act_dim`, with abstract states of `latent` and abstract actions of `abstract_act`
+    /// entries.
     pub fn new(
         (x_dim, act_dim): (usize, usize),
         (latent, abstract_act): (usize, usize),
         hidden: &[usize],
         device: &Device,
     ) -> Homomorphism {
-        let homomorphism = Homomorphism {
+        Homomorphism {
             state_map: MlpConfig::new(x_dim, hidden, latent).init(device),
             action_map: MlpConfig::new(x_dim + act_dim, hidden, abstract_act).init(device),
             transition: MlpConfig::new(latent + abstract_act, hidden, 2 * latent).init(device),
             reward: MlpConfig::new(latent + abstract_act, hidden, 1).init(device),
-        };
-        materialize(&homomorphism);
-        homomorphism
+        }
     }
 
-    /// `x̄ = f_ξ(x)`, `[B, latent]`.
-    pub fn abstract_state(&self, augmented: Tensor<2>) -> Tensor<2> {
+    /// `x̄ = f_ξ(x)`, `[S, B, latent]`.
+    pub fn abstract_state(&self, augmented: Tensor<3>) -> Tensor<3> {
         self.state_map.forward(augmented)
     }
 
-    /// `ā = g_ω(x, a) ∈ (−1, 1)`, `[B, Ā]`.
-    pub fn abstract_action(&self, augmented: Tensor<2>, action: Tensor<2>) -> Tensor<2> {
+    /// `ā = g_ω(x, a) ∈ (−1, 1)`, `[S, B, Ā]`.
+    pub fn abstract_action(&self, augmented: Tensor<3>, action: Tensor<3>) -> Tensor<3> {
         self.action_map
-            .forward(Tensor::cat(vec![augmented, action], 1))
+            .forward(Tensor::cat(vec![augmented, action], 2))
             .tanh()
     }
 
-    /// The mean and standard deviation of `P̄_τ(·|x̄, ā)`, each `[B, latent]`.
-    pub fn transition(&self, state: Tensor<2>, action: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
-        let out = self.transition.forward(Tensor::cat(vec![state, action], 1));
-        let latent = out.dims()[1] / 2;
-        let mean = out.clone().narrow(1, 0, latent);
-        let std = sigmoid(out.narrow(1, latent, latent))
+    /// The mean and standard deviation of `P̄_τ(·|x̄, ā)`, each `[S, B, latent]`.
+    pub fn transition(&self, state: Tensor<3>, action: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
+        let out = self.transition.forward(Tensor::cat(vec![state, action], 2));
+        let latent = out.dims()[2] / 2;
+        let mean = out.clone().narrow(2, 0, latent);
+        let std = sigmoid(out.narrow(2, latent, latent))
             .mul_scalar(SIGMA_MAX - SIGMA_MIN)
             .add_scalar(SIGMA_MIN);
         (mean, std)
     }
 
-    /// `r̄ = R̄_ν(x̄, ā)`, `[B, 1]`.
-    pub fn reward(&self, state: Tensor<2>, action: Tensor<2>) -> Tensor<2> {
-        self.reward.forward(Tensor::cat(vec![state, action], 1))
+    /// `r̄ = R̄_ν(x̄, ā)`, `[S, B, 1]`.
+    pub fn reward(&self, state: Tensor<3>, action: Tensor<3>) -> Tensor<3> {
+        self.reward.forward(Tensor::cat(vec![state, action], 2))
     }
 
-    /// `g_ω(x, a)` of K actions per state, `[K, B, Ā]` from `x` `[B, X]` and `a` `[K, B, A]`.
-    pub fn abstract_actions_k(&self, augmented: Tensor<2>, actions: Tensor<3>) -> Tensor<3> {
-        let [k, rows, act] = actions.dims();
-        let width = augmented.dims()[1];
-        let repeated = augmented
-            .unsqueeze_dim::<3>(0)
-            .repeat_dim(0, k)
-            .reshape([k * rows, width]);
-        let mapped = self.abstract_action(repeated, actions.reshape([k * rows, act]));
-        let abstract_act = mapped.dims()[1];
-        mapped.reshape([k, rows, abstract_act])
+    /// `g_ω(x, a)` of K actions per state, `[K, S, B, Ā]` from `x` `[S, B, X]` and `a`
+    /// `[K, S, B, A]`: each run maps its K·B rows, sample after sample, in one product.
+    pub fn abstract_actions_k(&self, augmented: Tensor<3>, actions: Tensor<4>) -> Tensor<4> {
+        let [k, runs, rows, act] = actions.dims();
+        let width = augmented.dims()[2];
+        let repeated =
+            augmented
+                .unsqueeze_dim::<4>(1)
+                .repeat_dim(1, k)
+                .reshape([runs, k * rows, width]);
+        let actions = actions.swap_dims(0, 1).reshape([runs, k * rows, act]);
+        let mapped = self.abstract_action(repeated, actions);
+        let abstract_act = mapped.dims()[2];
+        mapped
+            .reshape([runs, k, rows, abstract_act])
+            .swap_dims(0, 1)
     }
 }
 
@@ -316,8 +325,8 @@ impl LaxMetric {
         }
     }
 
-    /// The distance of each row of `u` to the same row of `v`, `[B, 1]`.
-    pub fn distance(&self, u: Tensor<2>, v: Tensor<2>) -> Tensor<2> {
+    /// The distance of each row of `u` to the same row of `v`, `[S, B, 1]`.
+    pub fn distance(&self, u: Tensor<3>, v: Tensor<3>) -> Tensor<3> {
         let gap = (u - v).abs();
         let per_dimension = match self.distance {
             Distance::L1 => gap,
@@ -329,66 +338,79 @@ impl LaxMetric {
         self.reduce(per_dimension)
     }
 
-    fn reduce(&self, per_dimension: Tensor<2>) -> Tensor<2> {
+    fn reduce(&self, per_dimension: Tensor<3>) -> Tensor<3> {
         match self.reduction {
-            MetricReduction::Sum => per_dimension.sum_dim(1),
-            MetricReduction::Mean => per_dimension.mean_dim(1),
+            MetricReduction::Sum => per_dimension.sum_dim(2),
+            MetricReduction::Mean => per_dimension.mean_dim(2),
         }
     }
 }
 
 /// The 2-Wasserstein distance of diagonal Gaussians `N(μ_i, σ_i²)` and `N(μ_j, σ_j²)` row by
-/// row, `[B, 1]`. Their covariances commute, so `W₂² = ‖μ_i − μ_j‖² + ‖σ_i − σ_j‖²` (the
+/// row, `[S, B, 1]`. Their covariances commute, so `W₂² = ‖μ_i − μ_j‖² + ‖σ_i − σ_j‖²` (the
 /// closed form of Eq. 2, `Sum`); `Mean` averages the per-dimension distances instead.
 pub fn gaussian_w2(
-    (mean_i, std_i): (Tensor<2>, Tensor<2>),
-    (mean_j, std_j): (Tensor<2>, Tensor<2>),
+    (mean_i, std_i): (Tensor<3>, Tensor<3>),
+    (mean_j, std_j): (Tensor<3>, Tensor<3>),
     reduction: MetricReduction,
-) -> Tensor<2> {
+) -> Tensor<3> {
     let squared = (mean_i - mean_j).square() + (std_i - std_j).square();
     match reduction {
-        MetricReduction::Sum => squared.sum_dim(1).add_scalar(W2_FLOOR).sqrt(),
-        MetricReduction::Mean => squared.add_scalar(W2_FLOOR).sqrt().mean_dim(1),
+        MetricReduction::Sum => squared.sum_dim(2).add_scalar(W2_FLOOR).sqrt(),
+        MetricReduction::Mean => squared.add_scalar(W2_FLOOR).sqrt().mean_dim(2),
     }
 }
 
-/// L_lax (Eq. 2) over the pairs `(i, j)` with `j` the row `shift` places before `i` (cyclically):
-/// `mean_i (d(x̄_i, x̄_j) − (d(r̃_i, r̃_j) + γ·W₂(P̄_i, P̄_j)))²`, with `P̄_i = P̄_τ(·|x̄_i, ā_i)`
-/// given as `(μ, σ)`.
+/// Each run's rows paired with the rows `shifts[run]` places before them (cyclically).
+fn paired(t: &Tensor<3>, shifts: &[usize]) -> Tensor<3> {
+    match shifts {
+        [shift] => t.clone().roll_dim(*shift, 1),
+        _ => Tensor::cat(
+            shifts
+                .iter()
+                .enumerate()
+                .map(|(run, &shift)| t.clone().narrow(0, run, 1).roll_dim(shift, 1))
+                .collect(),
+            0,
+        ),
+    }
+}
+
+/// L_lax (Eq. 2) over the pairs `(i, j)` with `j` the row `shifts[run]` places before `i`
+/// (cyclically), per run `[S]`: `mean_i (d(x̄_i, x̄_j) − (d(r̃_i, r̃_j) + γ·W₂(P̄_i, P̄_j)))²`,
+/// with `P̄_i = P̄_τ(·|x̄_i, ā_i)` given as `(μ, σ)`.
 pub fn lax_loss(
-    abstract_states: Tensor<2>,
-    rewards: Tensor<2>,
-    (mean, std): (Tensor<2>, Tensor<2>),
-    shift: usize,
+    abstract_states: Tensor<3>,
+    rewards: Tensor<3>,
+    (mean, std): (Tensor<3>, Tensor<3>),
+    shifts: &[usize],
     gamma: f64,
     metric: &LaxMetric,
 ) -> Tensor<1> {
-    let paired = |t: &Tensor<2>| t.clone().roll_dim(shift, 0);
     let (mean, std) = if metric.stop_transition_gradient {
         (mean.detach(), std.detach())
     } else {
         (mean, std)
     };
-    let state_distance = metric.distance(abstract_states.clone(), paired(&abstract_states));
-    let reward_distance = metric.distance(rewards.clone(), paired(&rewards));
+    let state_distance = metric.distance(abstract_states.clone(), paired(&abstract_states, shifts));
+    let reward_distance = metric.distance(rewards.clone(), paired(&rewards, shifts));
     let w2 = gaussian_w2(
         (mean.clone(), std.clone()),
-        (paired(&mean), paired(&std)),
+        (paired(&mean, shifts), paired(&std, shifts)),
         metric.reduction,
     );
-    (state_distance - (reward_distance + w2.mul_scalar(gamma)))
-        .square()
-        .mean()
+    batch_mean((state_distance - (reward_distance + w2.mul_scalar(gamma))).square())
 }
 
 /// L_h (Eq. 3): the abstract transition's fit to the encoded next state `f(x')` (a fixed
 /// target), summed over the latent dimensions, plus the abstract reward's `(r̄⁺ − r̃)²`,
-/// averaged over the batch. `eps` `[B, latent]` draws the sample of `SampleSquared`.
+/// averaged over each run's batch, `[S]`. `eps` `[S, B, latent]` draws the sample of
+/// `SampleSquared`.
 pub fn abstract_model_loss(
-    (mean, std): (Tensor<2>, Tensor<2>),
-    next_abstract_state: Tensor<2>,
-    eps: Tensor<2>,
-    (predicted_reward, reward): (Tensor<2>, Tensor<2>),
+    (mean, std): (Tensor<3>, Tensor<3>),
+    next_abstract_state: Tensor<3>,
+    eps: Tensor<3>,
+    (predicted_reward, reward): (Tensor<3>, Tensor<3>),
     form: TransitionLoss,
 ) -> Tensor<1> {
     let transition = match form {
@@ -400,7 +422,7 @@ pub fn abstract_model_loss(
         }
         TransitionLoss::SampleSquared => (mean + std * eps - next_abstract_state).square(),
     };
-    (transition.sum_dim(1) + (predicted_reward - reward).square()).mean()
+    batch_mean(transition.sum_dim(2) + (predicted_reward - reward).square())
 }
 
 /// `train.csv` columns.
@@ -414,6 +436,7 @@ const CRITIC_STATS: [&str; 2] = ["critic_loss", "alpha"];
 const ACTOR_STAT: &str = "actor_loss";
 const LIFTING_STAT: &str = "lifting_loss";
 
+/// Principled D2HPG for a stack of runs (a solo run is S = 1).
 pub struct D2hpgPrincipled {
     spec: AgentSpec,
     /// The abstract MDP's sizes: `x̄` of `latent_dim`, `ā` in (−1, 1)^Ā.
@@ -426,13 +449,19 @@ pub struct D2hpgPrincipled {
     pub regular: SacLearner,
     /// `π̄_θ'` on `x̄`, `Q_φ2` on `(x̄, ā)`, actions in (−1, 1).
     pub abstract_learner: SacLearner,
-    /// The pairing shifts of L_lax and the samples of `SampleSquared`.
-    pub model_noise: Noise,
-    lifting_noise: Noise,
+    /// Per run: the pairing shifts of L_lax and the samples of `SampleSquared`.
+    pub model_noise: Vec<Noise>,
+    lifting_noise: Vec<Noise>,
 }
 
 impl D2hpgPrincipled {
-    pub fn new(config: &Config, spec: &AgentSpec, devices: &Devices, seed: u64) -> D2hpgPrincipled {
+    /// The runs of `seeds`.
+    pub fn new(
+        config: &Config,
+        spec: &AgentSpec,
+        devices: &Devices,
+        seeds: &[u64],
+    ) -> D2hpgPrincipled {
         let critic_dim = match config.regular_critic {
             RegularCritic::TrueState => spec.obs_dim,
             RegularCritic::Augmented => spec.augmented_dim(),
@@ -448,31 +477,40 @@ impl D2hpgPrincipled {
             action_low: vec![-1.0; abstract_act],
             action_high: vec![1.0; abstract_act],
         };
-        let regular = SacLearner::new(
+        let named = |name: &str| -> Vec<u64> {
+            seeds.iter().map(|&seed| seeds::named(seed, name)).collect()
+        };
+        let regular = SacLearner::stacked(
             spec.augmented_dim(),
             critic_dim,
             spec,
             &config.sac,
             devices,
-            seed,
+            seeds,
         );
-        let abstract_learner = SacLearner::new(
+        let abstract_learner = SacLearner::stacked(
             config.latent_dim,
             config.latent_dim,
             &abstract_spec,
             &config.sac,
             devices,
-            seeds::named(seed, "d2hpg-principled/abstract"),
+            &named("d2hpg-principled/abstract"),
         );
-        devices
-            .train
-            .seed(seeds::named(seed, "d2hpg-principled/homomorphism"));
-        let homomorphism = Homomorphism::new(
-            (spec.augmented_dim(), spec.act_dim),
-            (config.latent_dim, abstract_act),
-            &config.homomorphism_hidden,
-            &devices.train,
+        let homomorphism = stack(
+            named("d2hpg-principled/homomorphism")
+                .into_iter()
+                .map(|seed| {
+                    devices.train.seed(seed);
+                    Homomorphism::new(
+                        (spec.augmented_dim(), spec.act_dim),
+                        (config.latent_dim, abstract_act),
+                        &config.homomorphism_hidden,
+                        &devices.train,
+                    )
+                })
+                .collect(),
         );
+        let streams = |name: &str| named(name).into_iter().map(Noise::new).collect();
         D2hpgPrincipled {
             spec: spec.clone(),
             abstract_spec,
@@ -481,20 +519,24 @@ impl D2hpgPrincipled {
             homomorphism_opt: adam(config.sac.adam_epsilon),
             regular,
             abstract_learner,
-            model_noise: Noise::new(seeds::named(seed, "d2hpg-principled/model")),
-            lifting_noise: Noise::new(seeds::named(seed, "d2hpg-principled/lifting")),
+            model_noise: streams("d2hpg-principled/model"),
+            lifting_noise: streams("d2hpg-principled/lifting"),
         }
     }
 
-    /// Line 23: one Adam step of `h`, `P̄_τ` and `R̄_ν` on `lax_weight·L_lax + L_h`. Returns
-    /// L_lax and L_h.
-    fn update_homomorphism(&mut self, t: &TransitionTensors) -> (f64, f64) {
+    /// Line 23: one Adam step of `h`, `P̄_τ` and `R̄_ν` on `lax_weight·L_lax + L_h`, summed
+    /// over the runs. Returns each run's L_lax and L_h.
+    fn update_homomorphism(&mut self, t: &TransitionTensors) -> (Vec<f64>, Vec<f64>) {
         let plain = &self.regular.devices.plain;
-        let rows = t.reward.dims()[0];
-        // A shift in 1..rows pairs no sample with itself.
-        let shift = 1 + self.model_noise.below(rows.max(2) - 1);
-        // Drawn whatever the transition loss, so that the stream does not depend on it.
-        let eps = self.model_noise.normal(rows, self.config.latent_dim, plain);
+        let rows = t.reward.dims()[1];
+        // Per run: a shift in 1..rows pairs no sample with itself; ε is drawn whatever the
+        // transition loss, so that the stream does not depend on it.
+        let shifts: Vec<usize> = self
+            .model_noise
+            .iter_mut()
+            .map(|noise| 1 + noise.below(rows.max(2) - 1))
+            .collect();
+        let eps = Noise::stacked_normal(&mut self.model_noise, rows, self.config.latent_dim, plain);
         let h = &self.homomorphism;
         let state = h.abstract_state(t.augmented.clone());
         let action = h.abstract_action(t.augmented.clone(), t.action.clone());
@@ -505,7 +547,7 @@ impl D2hpgPrincipled {
             state,
             t.reward.clone(),
             transition.clone(),
-            shift,
+            &shifts,
             self.config.sac.gamma,
             &LaxMetric::of(&self.config),
         );
@@ -516,8 +558,8 @@ impl D2hpgPrincipled {
             (predicted_reward, t.reward.clone()),
             self.config.transition_loss,
         );
-        let values = (scalar(&lax), scalar(&model));
-        let loss = lax.mul_scalar(self.config.lax_weight) + model;
+        let values = (per_run(lax.clone()), per_run(model.clone()));
+        let loss = (lax.mul_scalar(self.config.lax_weight) + model).sum();
         let grads = GradientsParams::from_grads(loss.backward(), &self.homomorphism);
         self.homomorphism = self.homomorphism_opt.step(
             self.config.sac.learning_rate,
@@ -539,26 +581,25 @@ impl D2hpgPrincipled {
             AbstractReward::Replay => t.reward.clone(),
         };
         SacBatch {
-            actor_input: state.clone().unsqueeze_dim(0),
-            critic_input: state.unsqueeze_dim(0),
-            action: action.unsqueeze_dim(0),
-            reward: reward.unsqueeze_dim(0),
-            next_actor_input: next_state.clone().unsqueeze_dim(0),
-            next_critic_input: next_state.unsqueeze_dim(0),
-            done: t.done.clone().unsqueeze_dim(0),
+            actor_input: state.clone(),
+            critic_input: state,
+            action,
+            reward,
+            next_actor_input: next_state.clone(),
+            next_critic_input: next_state,
+            done: t.done.clone(),
         }
     }
 }
 
-/// A one-element tensor's value.
-fn scalar(loss: &Tensor<1>) -> f64 {
-    f64::from(loss.clone().inner().into_scalar::<f32>())
-}
-
 impl Agent for D2hpgPrincipled {
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+    fn runs(&self) -> usize {
+        self.regular.runs()
+    }
+
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         self.regular
-            .act_run(0, augmented, rows, self.spec.augmented_dim(), mode)
+            .act_run(run, augmented, rows, self.spec.augmented_dim(), mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {
@@ -584,10 +625,12 @@ impl Agent for D2hpgPrincipled {
             .collect()
     }
 
-    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        let batch = ctx.batch()?;
+    fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<Vec<Stats>, ReplayError> {
         let plain = self.regular.devices.plain.clone();
-        let t = TransitionTensors::new(&batch, &plain);
+        let t = TransitionTensors::stacked(&UpdateContext::batches(contexts)?, &plain);
         // 22–23. The homomorphism and the abstract model.
         let (lax, model) = self.update_homomorphism(&t);
         let abstract_batch = self.abstract_batch(&t);
@@ -600,66 +643,67 @@ impl Agent for D2hpgPrincipled {
             (t.augmented.clone(), t.next_augmented.clone()),
             critic_input,
         );
-        let (rows, k) = (batch.len(), self.config.lifting_samples);
+        let (rows, k) = (regular_batch.rows(), self.config.lifting_samples);
         let (act, abstract_act) = (self.spec.act_dim, self.abstract_spec.act_dim);
         let (regular, abstract_learner) = (&mut self.regular, &mut self.abstract_learner);
-        let (alpha, abstract_alpha) = (
-            regular.temperature.alphas()[0],
-            abstract_learner.temperature.alphas()[0],
+        let (alphas, abstract_alphas) = (
+            regular.temperature.alphas(),
+            abstract_learner.temperature.alphas(),
         );
 
         // 24. Both critics, and both policies' distributions before either policy moves. The
         //     learners share no parameters and draw from their own noise streams, so rayon
         //     runs them side by side with the same numbers as one after the other.
-        let ((critic_loss, regular_distribution), (abstract_critic_loss, abstract_distribution)) =
-            rayon::join(
-                || {
-                    let loss = regular.update_critics(&regular_batch);
-                    (loss, regular.distribution(&regular_batch))
-                },
-                || {
-                    let loss = abstract_learner.update_critics(&abstract_batch);
-                    (loss, abstract_learner.distribution(&abstract_batch))
-                },
-            );
+        let (
+            (critic_losses, regular_distribution),
+            (abstract_critic_losses, abstract_distribution),
+        ) = rayon::join(
+            || {
+                let losses = regular.update_critics(&regular_batch);
+                (losses, regular.distribution(&regular_batch))
+            },
+            || {
+                let losses = abstract_learner.update_critics(&abstract_batch);
+                (losses, abstract_learner.distribution(&abstract_batch))
+            },
+        );
 
         // 27. L_lift (Eq. 4): the regular policy's K actions at x, mapped by g_ω, against the
         //     abstract policy's K actions at x̄ = f(x), held fixed. With Ā = A both sides share
-        //     ε (common random numbers, as `d2hpg`). Logged unweighted.
-        let eps = self.lifting_noise.normal3(k, rows, act, &plain);
+        //     ε (common random numbers, as `d2hpg`). Logged unweighted, per run.
+        let eps = Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, act, &plain);
         let abstract_eps = if abstract_act == act {
             eps.clone()
         } else {
-            self.lifting_noise.normal3(k, rows, abstract_act, &plain)
+            Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, abstract_act, &plain)
         };
-        let (abstract_mean, abstract_log_std) = one_run(abstract_distribution.clone());
+        let (abstract_mean, abstract_log_std) = abstract_distribution.clone();
         let abstract_actions = squashed_samples_k(
             (abstract_mean.inner(), abstract_log_std.inner()),
             abstract_eps,
             &abstract_learner.scale,
         );
-        let regular_actions =
-            squashed_samples_k(one_run(regular_distribution.clone()), eps, &regular.scale);
+        let regular_actions = squashed_samples_k(regular_distribution.clone(), eps, &regular.scale);
         let lifted = self
             .homomorphism
             .abstract_actions_k(t.augmented.clone(), regular_actions);
         let lifting = lifting_loss(lifted, abstract_actions);
-        let lifting_value = scalar(&lifting);
-        let weighted_lifting = lifting.mul_scalar(self.config.lifting_weight);
+        let lifting_values = per_run(lifting.clone());
+        let weighted_lifting = lifting.mul_scalar(self.config.lifting_weight).sum();
 
         // 25–26, 28. The policies side by side: the regular one by BPQL's actor step with
         //     λ·L_lift in its loss (or λ·L_lift alone), the abstract one by SAC's actor step on
         //     Q_φ2 (the homomorphic policy gradient); then temperatures and targets.
         let policy_step = self.config.regular_policy_step;
-        let (actor_loss, (abstract_actor_loss, _)) = rayon::join(
+        let (actor_losses, (abstract_actor_losses, _)) = rayon::join(
             || {
                 if policy_step {
-                    let (loss, _) = regular.update_policy(
+                    let (losses, _) = regular.update_policy(
                         &regular_batch,
                         regular_distribution,
                         Some(weighted_lifting),
                     );
-                    Some(loss[0])
+                    Some(losses)
                 } else {
                     // Line 24 is not optional: Q_φ1 and its targets train either way.
                     regular.update_actor_by(weighted_lifting);
@@ -670,39 +714,59 @@ impl Agent for D2hpgPrincipled {
             || abstract_learner.update_policy(&abstract_batch, abstract_distribution, None),
         );
 
-        let mut stats: Stats = MODEL_STATS.into_iter().zip([lax, model]).collect();
-        stats.extend(ABSTRACT_STATS.into_iter().zip([
-            abstract_critic_loss[0],
-            abstract_actor_loss[0],
-            abstract_alpha,
-        ]));
-        stats.extend(CRITIC_STATS.into_iter().zip([critic_loss[0], alpha]));
-        if let Some(actor_loss) = actor_loss {
-            stats.push((ACTOR_STAT, actor_loss));
+        Ok((0..self.regular.runs())
+            .map(|run| {
+                let mut stats: Stats = MODEL_STATS
+                    .into_iter()
+                    .zip([lax[run], model[run]])
+                    .collect();
+                stats.extend(ABSTRACT_STATS.into_iter().zip([
+                    abstract_critic_losses[run],
+                    abstract_actor_losses[run],
+                    abstract_alphas[run],
+                ]));
+                stats.extend(
+                    CRITIC_STATS
+                        .into_iter()
+                        .zip([critic_losses[run], alphas[run]]),
+                );
+                if let Some(actor_losses) = &actor_losses {
+                    stats.push((ACTOR_STAT, actor_losses[run]));
+                }
+                stats.push((LIFTING_STAT, lifting_values[run]));
+                stats
+            })
+            .collect())
+    }
+
+    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.regular.save(dirs, "regular_")?;
+        self.abstract_learner.save(dirs, "abstract_")?;
+        for (run, dir) in dirs.iter().enumerate() {
+            let files = CheckpointDir::new(dir);
+            files.save_slice("homomorphism.bpk", &self.homomorphism, run)?;
+            files.save_optimizer_slice("homomorphism_adam.bpk", &self.homomorphism_opt, run)?;
+            files.save_json("model_noise.json", &self.model_noise[run])?;
+            files.save_json("lifting_noise.json", &self.lifting_noise[run])?;
         }
-        stats.push((LIFTING_STAT, lifting_value));
-        Ok(stats)
+        Ok(())
     }
 
-    fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.regular.save(&[dir], "regular_")?;
-        self.abstract_learner.save(&[dir], "abstract_")?;
-        let files = CheckpointDir::new(dir);
-        files.save_module("homomorphism.bpk", &self.homomorphism)?;
-        files.save_optimizer("homomorphism_adam.bpk", &self.homomorphism_opt)?;
-        files.save_json("model_noise.json", &self.model_noise)?;
-        files.save_json("lifting_noise.json", &self.lifting_noise)
-    }
-
-    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.regular.load(&[dir], "regular_")?;
-        self.abstract_learner.load(&[dir], "abstract_")?;
-        let files = CheckpointDir::new(dir);
-        self.homomorphism = files.load_module("homomorphism.bpk", self.homomorphism.clone())?;
-        self.homomorphism_opt =
-            files.load_optimizer("homomorphism_adam.bpk", self.homomorphism_opt.clone())?;
-        self.model_noise = files.load_json("model_noise.json")?;
-        self.lifting_noise = files.load_json("lifting_noise.json")?;
+    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.regular.load(dirs, "regular_")?;
+        self.abstract_learner.load(dirs, "abstract_")?;
+        let files: Vec<CheckpointDir> = dirs.iter().map(|dir| CheckpointDir::new(dir)).collect();
+        self.homomorphism = load_stack(&files, "homomorphism.bpk", self.homomorphism.clone())?;
+        self.homomorphism_opt = load_optimizer_stack(
+            &files,
+            "homomorphism_adam.bpk",
+            self.homomorphism_opt.clone(),
+        )?;
+        let streams = |name: &str| -> Result<Vec<Noise>, LearnError> {
+            files.iter().map(|files| files.load_json(name)).collect()
+        };
+        self.model_noise = streams("model_noise.json")?;
+        self.lifting_noise = streams("lifting_noise.json")?;
         Ok(())
     }
 }

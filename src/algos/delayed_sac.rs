@@ -27,12 +27,12 @@ use serde::{Deserialize, Serialize};
 
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, check};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats};
+use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats, per_run};
 use crate::acting::{ActingNetwork, RolloutModel};
 use crate::delay::{BatchExtras, ReplayError, Transitions};
 use crate::learn::{
-    CheckpointDir, Devices, LearnError, Mlp, MlpConfig, TransitionTensors, adam, materialize,
-    matrix, rows, to_vec,
+    CheckpointDir, Devices, LearnError, Mlp, MlpConfig, TransitionTensors, adam,
+    load_optimizer_stack, load_stack, matrix, slice, stack, stacked_rows, to_vec,
 };
 use crate::seeds;
 
@@ -63,12 +63,15 @@ crate::algo_config! {
 }
 
 impl AlgoConfig for Config {
-    const INFO: AlgoInfo = AlgoInfo::single_learner(
-        "delayed-sac",
-        "Delayed SAC",
-        "SAC on s_t, acting on the state a learned one-step model predicts over the Δ pending actions",
-        false,
-    );
+    const INFO: AlgoInfo = AlgoInfo {
+        stacked_learner: true,
+        ..AlgoInfo::single_learner(
+            "delayed-sac",
+            "Delayed SAC",
+            "SAC on s_t, acting on the state a learned one-step model predicts over the Δ pending actions",
+            false,
+        )
+    };
 
     fn validate(&self) -> Result<(), AlgoError> {
         let algo = Self::INFO.name;
@@ -90,7 +93,11 @@ impl AlgoConfig for Config {
     }
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        Box::new(DelayedSac::new(self, spec, devices, seed))
+        self.build_stack(spec, devices, &[seed])
+    }
+
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        Box::new(DelayedSac::new(self, spec, devices, seeds))
     }
 }
 
@@ -141,42 +148,49 @@ impl InputMoments {
         (self.mean.iter().map(|&m| m as f32).collect(), std.collect())
     }
 
-    /// [`InputMoments::mean_std`] as `[1, width]` rows.
-    fn tensors(&self, device: &Device) -> (Tensor<2>, Tensor<2>) {
-        let width = self.mean.len();
-        let (mean, std) = self.mean_std();
-        (
-            matrix(mean, 1, width, device),
-            matrix(std, 1, width, device),
-        )
+    /// Each run's [`InputMoments::mean_std`] as a stack of `[1, width]` rows, `[S, 1, width]`.
+    fn tensors(runs: &[InputMoments], device: &Device) -> (Tensor<3>, Tensor<3>) {
+        let width = runs[0].mean.len();
+        let (means, stds): (Vec<Vec<f32>>, Vec<Vec<f32>>) =
+            runs.iter().map(InputMoments::mean_std).unzip();
+        let rows = |values: Vec<Vec<f32>>| {
+            matrix(values.concat(), runs.len(), width, device).unsqueeze_dim(1)
+        };
+        (rows(means), rows(stds))
     }
 }
 
-/// The learned one-step model `f(s, a)`.
+/// The learned one-step model `f(s, a)` of each run of a stack.
 pub struct ForwardModel {
+    /// Stacked, one slice per run.
     pub network: Mlp,
     pub output: ModelOutput,
-    /// `None` when inputs are not normalised.
-    pub moments: Option<InputMoments>,
+    /// Each run's input statistics; `None` when inputs are not normalised.
+    pub moments: Option<Vec<InputMoments>>,
 }
 
+/// The runs' input `(mean, std)`, `[S, 1, width]` each, or `None`.
+pub type Normaliser = Option<(Tensor<3>, Tensor<3>)>;
+
 impl ForwardModel {
-    /// The inputs' `(mean, std)` rows on `device`, when inputs are normalised: built once per
-    /// batch or rollout and handed to every [`ForwardModel::predict`] of it.
-    pub fn normaliser(&self, device: &Device) -> Option<(Tensor<2>, Tensor<2>)> {
-        self.moments.as_ref().map(|moments| moments.tensors(device))
+    /// The inputs' `(mean, std)` rows of runs `runs` on `device`, when inputs are normalised:
+    /// built once per batch or rollout and handed to every [`ForwardModel::predict`] of it.
+    pub fn normaliser(&self, runs: std::ops::Range<usize>, device: &Device) -> Normaliser {
+        self.moments
+            .as_ref()
+            .map(|moments| InputMoments::tensors(&moments[runs], device))
     }
 
-    /// `f(s, a)` for `[B, obs]` states and `[B, act]` actions, with `network` (the model itself,
-    /// or its plain copy off the graph) and the model's [`ForwardModel::normaliser`].
+    /// `f(s, a)` for `[S, B, obs]` states and `[S, B, act]` actions, with `network` (the model
+    /// itself, or its plain copy off the graph) and the runs' [`ForwardModel::normaliser`].
     pub fn predict(
         &self,
         network: &Mlp,
-        normaliser: Option<&(Tensor<2>, Tensor<2>)>,
-        state: Tensor<2>,
-        action: Tensor<2>,
-    ) -> Tensor<2> {
-        let input = Tensor::cat(vec![state.clone(), action], 1);
+        normaliser: &Normaliser,
+        state: Tensor<3>,
+        action: Tensor<3>,
+    ) -> Tensor<3> {
+        let input = Tensor::cat(vec![state.clone(), action], 2);
         let input = match normaliser {
             Some((mean, std)) => (input - mean.clone()) / std.clone(),
             None => input,
@@ -188,31 +202,41 @@ impl ForwardModel {
         }
     }
 
-    /// `f^k(s_{τ−Δ}, a_{τ−Δ}, …)` for k = 1..=Δ from augmented states `[B, obs + Δ·act]`, off the
-    /// graph: the predicted `ŝ_{τ−Δ+k}`, oldest first.
-    pub fn rollout(&self, augmented: Tensor<2>, spec: &AgentSpec) -> Vec<Tensor<2>> {
+    /// `f^k(s_{τ−Δ}, a_{τ−Δ}, …)` for k = 1..=Δ from augmented states `[S, B, obs + Δ·act]`,
+    /// off the graph, with `network` and `normaliser` (every run's, or one run's slice): the
+    /// predicted `ŝ_{τ−Δ+k}`, oldest first.
+    pub fn rollout(
+        &self,
+        network: &Mlp,
+        normaliser: &Normaliser,
+        augmented: Tensor<3>,
+        spec: &AgentSpec,
+    ) -> Vec<Tensor<3>> {
         let (obs, act) = (spec.obs_dim, spec.act_dim);
-        let rows = augmented.dims()[0];
-        let normaliser = self.normaliser(&augmented.device());
-        let network = self.network.valid();
-        let mut state = augmented.clone().slice([0..rows, 0..obs]);
+        let mut state = augmented.clone().narrow(2, 0, obs);
         (0..spec.delay)
             .map(|k| {
-                let action = augmented
-                    .clone()
-                    .slice([0..rows, obs + k * act..obs + (k + 1) * act]);
-                state = self.predict(&network, normaliser.as_ref(), state.clone(), action);
+                let action = augmented.clone().narrow(2, obs + k * act, act);
+                state = self.predict(network, normaliser, state.clone(), action);
                 state.clone()
             })
             .collect()
     }
 }
 
-/// The model's loss (and logged error) per state dimension: `E[‖ŝ − s‖²] / dim(S)`.
-pub fn prediction_error(predicted: Tensor<2>, truth: Tensor<2>) -> Tensor<1> {
-    (predicted - truth).square().mean()
+/// The model's loss (and logged error) per state dimension, per run: `E[‖ŝ − s‖²] / dim(S)`
+/// over each run's `[B, obs]`, `[S]` (the last axis of `[S, B·obs]`, reduced as a solo run's
+/// whole-tensor mean).
+pub fn prediction_error(predicted: Tensor<3>, truth: Tensor<3>) -> Tensor<1> {
+    let [runs, rows, obs] = predicted.dims();
+    (predicted - truth)
+        .square()
+        .reshape([runs, rows * obs])
+        .mean_dim(1)
+        .reshape([runs])
 }
 
+/// Delayed SAC for a stack of runs (a solo run is S = 1).
 pub struct DelayedSac {
     spec: AgentSpec,
     /// SAC on the true state.
@@ -223,16 +247,26 @@ pub struct DelayedSac {
 }
 
 impl DelayedSac {
-    pub fn new(config: &Config, spec: &AgentSpec, devices: &Devices, seed: u64) -> DelayedSac {
-        let learner = SacLearner::new(spec.obs_dim, spec.obs_dim, spec, &config.sac, devices, seed);
-        devices.train.seed(seeds::named(seed, "delayed-sac/model"));
-        let network = MlpConfig::new(
-            spec.obs_dim + spec.act_dim,
-            &config.model_hidden,
+    /// The runs of `seeds`: each run's model drawn after seeding the device with its own seed.
+    pub fn new(config: &Config, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> DelayedSac {
+        let learner = SacLearner::stacked(
             spec.obs_dim,
-        )
-        .init(&devices.train);
-        materialize(&network);
+            spec.obs_dim,
+            spec,
+            &config.sac,
+            devices,
+            seeds,
+        );
+        let width = spec.obs_dim + spec.act_dim;
+        let network = stack(
+            seeds
+                .iter()
+                .map(|&seed| {
+                    devices.train.seed(seeds::named(seed, "delayed-sac/model"));
+                    MlpConfig::new(width, &config.model_hidden, spec.obs_dim).init(&devices.train)
+                })
+                .collect(),
+        );
         DelayedSac {
             spec: spec.clone(),
             learner,
@@ -241,60 +275,82 @@ impl DelayedSac {
                 output: config.model_output,
                 moments: config
                     .normalise_model_inputs
-                    .then(|| InputMoments::new(spec.obs_dim + spec.act_dim)),
+                    .then(|| seeds.iter().map(|_| InputMoments::new(width)).collect()),
             },
             model_opt: adam(config.sac.adam_epsilon),
             model_learning_rate: config.model_learning_rate,
         }
     }
 
-    /// The Δ-step errors of the model on `batch`: at `s_τ`, and the mean over `s_{τ−Δ+1..τ}`.
-    fn rollout_errors(&self, batch: &Transitions, device: &Device) -> Option<(f64, f64)> {
-        let (n, obs, delay) = (batch.len(), self.spec.obs_dim, self.spec.delay);
+    /// Each run's Δ-step errors of its model on its batch: at `s_τ`, and the mean over
+    /// `s_{τ−Δ+1..τ}`.
+    fn rollout_errors(
+        &self,
+        batches: &[Transitions],
+        augmented: Tensor<3>,
+        device: &Device,
+    ) -> Option<Vec<(f64, f64)>> {
+        let (obs, delay) = (self.spec.obs_dim, self.spec.delay);
         if delay == 0 {
             return None;
         }
-        let predicted = self
-            .model
-            .rollout(rows(batch.augmented.clone(), n, device), &self.spec);
-        let truth = matrix(batch.intermediate_states.clone(), n * delay, obs, device)
-            .reshape([n, delay * obs]);
-        let errors: Vec<f64> = predicted
+        let predicted = self.model.rollout(
+            &self.model.network.valid(),
+            &self.model.normaliser(0..batches.len(), device),
+            augmented,
+            &self.spec,
+        );
+        let truth = stacked_rows(
+            batches.iter().map(|b| b.intermediate_states.as_slice()),
+            batches,
+            device,
+        );
+        let errors: Vec<Vec<f64>> = predicted
             .into_iter()
             .enumerate()
-            .map(|(k, p)| {
-                let true_k = truth.clone().slice([0..n, k * obs..(k + 1) * obs]);
-                f64::from(prediction_error(p, true_k).into_scalar::<f32>())
-            })
+            .map(|(k, p)| per_run(prediction_error(p, truth.clone().narrow(2, k * obs, obs))))
             .collect();
-        Some((errors[delay - 1], errors.iter().sum::<f64>() / delay as f64))
+        Some(
+            (0..batches.len())
+                .map(|run| {
+                    let sum: f64 = errors.iter().map(|e| e[run]).sum();
+                    (errors[delay - 1][run], sum / delay as f64)
+                })
+                .collect(),
+        )
     }
 }
 
 impl Agent for DelayedSac {
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+    fn runs(&self) -> usize {
+        self.learner.runs()
+    }
+
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         let plain = self.learner.devices.plain.clone();
-        let x = matrix(
-            augmented[..rows * self.spec.augmented_dim()].to_vec(),
-            rows,
-            self.spec.augmented_dim(),
-            &plain,
-        );
-        let predicted = match self.model.rollout(x.clone(), &self.spec).pop() {
-            Some(state) => state,
-            None => x, // Δ = 0: x_t = s_t
+        let aug = self.spec.augmented_dim();
+        let x = matrix(augmented[..rows * aug].to_vec(), rows, aug, &plain).unsqueeze_dim(0);
+        let network = match self.runs() {
+            1 => self.model.network.valid(),
+            _ => slice(&self.model.network.valid(), run),
         };
-        to_vec(match mode {
-            ActMode::Explore => self.learner.explore(predicted.unsqueeze_dim(0)),
-            ActMode::Deterministic => self.learner.exploit(predicted.unsqueeze_dim(0)),
-        })
+        let normaliser = self.model.normaliser(run..run + 1, &plain);
+        let (predicted, width) = match self
+            .model
+            .rollout(&network, &normaliser, x, &self.spec)
+            .pop()
+        {
+            Some(state) => (to_vec(state), self.spec.obs_dim),
+            None => (augmented[..rows * aug].to_vec(), aug), // Δ = 0: x_t = s_t
+        };
+        self.learner.act_run(run, &predicted, rows, width, mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::ModelRollout {
             model: RolloutModel {
-                layers: self.model.network.weights(),
-                input_moments: self.model.moments.as_ref().map(InputMoments::mean_std),
+                layers: self.model.network.weights(0),
+                input_moments: self.model.moments.as_ref().map(|m| m[0].mean_std()),
                 predicts_difference: self.model.output == ModelOutput::Difference,
             },
             policy: self.learner.actor.weights(0),
@@ -315,65 +371,84 @@ impl Agent for DelayedSac {
         }
     }
 
-    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        let batch = &ctx.batch()?;
+    fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<Vec<Stats>, ReplayError> {
+        let batches = UpdateContext::batches(contexts)?;
         let plain = self.learner.devices.plain.clone();
-        let n = batch.len();
-        let tensors = TransitionTensors::new(batch, &plain);
-        let on_state = (tensors.state.clone(), tensors.next_state.clone());
+        let t = TransitionTensors::stacked(&batches, &plain);
 
         // SAC on the true, time-aligned (s, a, r, s').
-        let mut stats = self
+        let on_state = (t.state.clone(), t.next_state.clone());
+        let sac_stats = self
             .learner
-            .update(&SacBatch::new(&tensors, on_state.clone(), on_state))[0]
-            .named();
+            .update(&SacBatch::new(&t, on_state.clone(), on_state));
 
-        // The Δ-step errors, then one model step on L_f, after merging the batch's inputs into
-        // the normalisation statistics.
-        let rollout = self.rollout_errors(batch, &plain);
+        // The Δ-step errors, then one model step on L_f, after merging each run's batch into its
+        // normalisation statistics.
+        let rollout = self.rollout_errors(&batches, t.augmented.clone(), &plain);
         if let Some(moments) = &mut self.model.moments {
-            let inputs: Vec<f32> = batch
-                .state
-                .chunks(self.spec.obs_dim)
-                .zip(batch.action.chunks(self.spec.act_dim))
-                .flat_map(|(s, a)| s.iter().chain(a).copied())
-                .collect();
-            moments.add(&inputs);
+            for (moments, batch) in moments.iter_mut().zip(&batches) {
+                let inputs: Vec<f32> = batch
+                    .state
+                    .chunks(self.spec.obs_dim)
+                    .zip(batch.action.chunks(self.spec.act_dim))
+                    .flat_map(|(s, a)| s.iter().chain(a).copied())
+                    .collect();
+                moments.add(&inputs);
+            }
         }
         let predicted = self.model.predict(
             &self.model.network,
-            self.model.normaliser(&plain).as_ref(),
-            tensors.state.clone(),
-            tensors.action.clone(),
+            &self.model.normaliser(0..batches.len(), &plain),
+            t.state.clone(),
+            t.action.clone(),
         );
-        let loss = prediction_error(predicted, rows(batch.next_state.clone(), n, &plain));
-        let model_loss = f64::from(loss.clone().inner().into_scalar::<f32>());
-        let grads = GradientsParams::from_grads(loss.backward(), &self.model.network);
+        let losses = prediction_error(predicted, t.next_state);
+        let model_losses = per_run(losses.clone());
+        let grads = GradientsParams::from_grads(losses.sum().backward(), &self.model.network);
         self.model.network =
             self.model_opt
                 .step(self.model_learning_rate, self.model.network.clone(), grads);
 
-        stats.push((MODEL_STATS[0], model_loss));
-        if let Some((at_state, mean)) = rollout {
-            stats.extend([(MODEL_STATS[1], at_state), (MODEL_STATS[2], mean)]);
+        Ok(sac_stats
+            .iter()
+            .enumerate()
+            .map(|(run, sac)| {
+                let mut stats = sac.named();
+                stats.push((MODEL_STATS[0], model_losses[run]));
+                if let Some(rollout) = &rollout {
+                    let (at_state, mean) = rollout[run];
+                    stats.extend([(MODEL_STATS[1], at_state), (MODEL_STATS[2], mean)]);
+                }
+                stats
+            })
+            .collect())
+    }
+
+    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.learner.save(dirs, "")?;
+        for (run, dir) in dirs.iter().enumerate() {
+            let files = CheckpointDir::new(dir);
+            files.save_slice("model.bpk", &self.model.network, run)?;
+            files.save_optimizer_slice("model_adam.bpk", &self.model_opt, run)?;
+            let moments = self.model.moments.as_ref().map(|m| &m[run]);
+            files.save_json("model_inputs.json", &moments)?;
         }
-        Ok(stats)
+        Ok(())
     }
 
-    fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.learner.save(&[dir], "")?;
-        let files = CheckpointDir::new(dir);
-        files.save_module("model.bpk", &self.model.network)?;
-        files.save_optimizer("model_adam.bpk", &self.model_opt)?;
-        files.save_json("model_inputs.json", &self.model.moments)
-    }
-
-    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.learner.load(&[dir], "")?;
-        let files = CheckpointDir::new(dir);
-        self.model.network = files.load_module("model.bpk", self.model.network.clone())?;
-        self.model_opt = files.load_optimizer("model_adam.bpk", self.model_opt.clone())?;
-        self.model.moments = files.load_json("model_inputs.json")?;
+    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.learner.load(dirs, "")?;
+        let files: Vec<CheckpointDir> = dirs.iter().map(|dir| CheckpointDir::new(dir)).collect();
+        self.model.network = load_stack(&files, "model.bpk", self.model.network.clone())?;
+        self.model_opt = load_optimizer_stack(&files, "model_adam.bpk", self.model_opt.clone())?;
+        let moments = files
+            .iter()
+            .map(|files| files.load_json::<Option<InputMoments>>("model_inputs.json"))
+            .collect::<Result<Option<Vec<_>>, _>>()?;
+        self.model.moments = moments;
         Ok(())
     }
 }
@@ -381,21 +456,30 @@ impl Agent for DelayedSac {
 #[cfg(test)]
 mod tests {
     use burn::module::Param;
-    use burn::nn::Linear;
 
     use super::*;
-    use crate::learn::{LearnDevice, assert_close as close};
+    use crate::learn::{LearnDevice, StackedLinear, assert_close as close};
+
+    /// One run's network of one linear layer `g(s, a) = w_s·s + w_a·a`.
+    fn one_layer(w_s: f32, w_a: f32, device: &Device) -> Mlp {
+        Mlp {
+            layers: vec![StackedLinear {
+                weight: Param::from_data([[[w_s], [w_a]]], device),
+                bias: Param::from_data([[0.0f32]], device),
+            }],
+        }
+    }
+
+    /// `[1, rows, cols]`: one run's rows.
+    fn run_rows(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Tensor<3> {
+        matrix(values, rows, cols, device).unsqueeze_dim(0)
+    }
 
     /// The linear system `s' = s + (0.5·s + 2·a)`, i.e. `s' = 1.5·s + 2·a`, as a model whose
     /// network is one linear layer `g(s, a) = 0.5·s + 2·a` predicting the difference.
     fn linear_model(device: &Device) -> ForwardModel {
         ForwardModel {
-            network: Mlp {
-                layers: vec![Linear {
-                    weight: Param::from_data([[0.5f32], [2.0]], device),
-                    bias: Some(Param::from_data([0.0f32], device)),
-                }],
-            },
+            network: one_layer(0.5, 2.0, device),
             output: ModelOutput::Difference,
             moments: None,
         }
@@ -419,19 +503,19 @@ mod tests {
         // 0.5 and 0, so L_f = (0.25 + 0) / 2.
         let predicted = model.predict(
             &model.network,
-            None,
-            matrix(vec![1.0, 2.0], 2, 1, &device),
-            matrix(vec![0.0, 1.0], 2, 1, &device),
+            &None,
+            run_rows(vec![1.0, 2.0], 2, 1, &device),
+            run_rows(vec![0.0, 1.0], 2, 1, &device),
         );
         close(&to_vec(predicted.clone()), &[1.5, 5.0]);
-        let loss = prediction_error(predicted, matrix(vec![1.0, 5.0], 2, 1, &device));
+        let loss = prediction_error(predicted, run_rows(vec![1.0, 5.0], 2, 1, &device));
         close(&to_vec(loss), &[0.125]);
 
         // Δ = 3 from x = (s = 1; a = 1, −1, 0.5): 1.5 + 2 = 3.5, 5.25 − 2 = 3.25,
         // 4.875 + 1 = 5.875.
-        let x = matrix(vec![1.0, 1.0, -1.0, 0.5], 1, 4, &device);
+        let x = run_rows(vec![1.0, 1.0, -1.0, 0.5], 1, 4, &device);
         let rollout: Vec<f32> = model
-            .rollout(x, &spec(3))
+            .rollout(&model.network, &None, x, &spec(3))
             .into_iter()
             .flat_map(to_vec)
             .collect();
@@ -439,18 +523,13 @@ mod tests {
 
         // The same system with the network predicting s' itself: g = 1.5·s + 2·a.
         let next_state = ForwardModel {
-            network: Mlp {
-                layers: vec![Linear {
-                    weight: Param::from_data([[1.5f32], [2.0]], &device),
-                    bias: Some(Param::from_data([0.0f32], &device)),
-                }],
-            },
+            network: one_layer(1.5, 2.0, &device),
             output: ModelOutput::NextState,
             moments: None,
         };
-        let x = matrix(vec![1.0, 1.0, -1.0, 0.5], 1, 4, &device);
+        let x = run_rows(vec![1.0, 1.0, -1.0, 0.5], 1, 4, &device);
         let rollout: Vec<f32> = next_state
-            .rollout(x, &spec(3))
+            .rollout(&next_state.network, &None, x, &spec(3))
             .into_iter()
             .flat_map(to_vec)
             .collect();
@@ -463,7 +542,7 @@ mod tests {
     #[test]
     fn the_agent_acts_on_the_state_rolled_delta_steps_forward() {
         let devices = Devices::new(LearnDevice::Cpu).unwrap();
-        let mut agent = DelayedSac::new(&Config::default(), &spec(3), &devices, 0);
+        let mut agent = DelayedSac::new(&Config::default(), &spec(3), &devices, &[0]);
         agent.model = linear_model(&devices.plain);
         let acted = agent.act(&[1.0, 1.0, -1.0, 0.5], 1, ActMode::Deterministic);
         let policy_at = |s: f32| {
@@ -485,22 +564,22 @@ mod tests {
         // Rows (s, a): (1, 0), (3, 0) then (5, 0): mean (3, 0), population std (√(8/3), 0).
         moments.add(&[1.0, 0.0, 3.0, 0.0]);
         moments.add(&[5.0, 0.0]);
-        let (mean, std) = moments.tensors(&device);
+        let (mean, std) = InputMoments::tensors(std::slice::from_ref(&moments), &device);
         close(&to_vec(mean), &[3.0, 0.0]);
         // A dimension that never varied keeps scale 1.
         close(&to_vec(std), &[(8.0f32 / 3.0).sqrt(), 1.0]);
 
         // The model sees ((s − 3)/σ, a): with g = 0.5·ŝ + 2·a and s = 3 + σ, a = 1, f = s + 2.5.
         let model = ForwardModel {
-            moments: Some(moments),
+            moments: Some(vec![moments]),
             ..linear_model(&device)
         };
         let sigma = (8.0f32 / 3.0).sqrt();
         let predicted = model.predict(
             &model.network,
-            model.normaliser(&device).as_ref(),
-            matrix(vec![3.0 + sigma], 1, 1, &device),
-            matrix(vec![1.0], 1, 1, &device),
+            &model.normaliser(0..1, &device),
+            run_rows(vec![3.0 + sigma], 1, 1, &device),
+            run_rows(vec![1.0], 1, 1, &device),
         );
         close(&to_vec(predicted), &[3.0 + sigma + 2.5]);
     }

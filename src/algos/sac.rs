@@ -20,7 +20,7 @@ use crate::delay::{ReplayError, Transitions};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, Temperature,
     TransitionTensors, TwinQ, actor_loss, adam, batch_mean, critic_loss, critic_target,
-    load_optimizer_stack, load_stack, polyak, rows, slice, squashed_sample, stack,
+    load_optimizer_stack, load_stack, polyak, slice, squashed_sample, stack, stacked_rows,
     temperature_loss, to_vec,
 };
 
@@ -157,45 +157,26 @@ pub struct SacBatch {
 }
 
 impl SacBatch {
-    /// One run's batch (S = 1): the actions, rewards and terminations of `t`, with the actor on
-    /// `actor` and the critics on `critic` (each `(now, next)`, `[B, ·]`).
+    /// The batch of the runs of `t`: their actions, rewards and terminations, with the actor
+    /// on `actor` and the critics on `critic` (each `(now, next)`, `[S, B, ·]`).
     pub fn new(
         t: &TransitionTensors,
-        (actor_input, next_actor_input): (Tensor<2>, Tensor<2>),
-        (critic_input, next_critic_input): (Tensor<2>, Tensor<2>),
+        (actor_input, next_actor_input): (Tensor<3>, Tensor<3>),
+        (critic_input, next_critic_input): (Tensor<3>, Tensor<3>),
     ) -> SacBatch {
         SacBatch {
-            actor_input: actor_input.unsqueeze_dim(0),
-            critic_input: critic_input.unsqueeze_dim(0),
-            action: t.action.clone().unsqueeze_dim(0),
-            reward: t.reward.clone().unsqueeze_dim(0),
-            next_actor_input: next_actor_input.unsqueeze_dim(0),
-            next_critic_input: next_critic_input.unsqueeze_dim(0),
-            done: t.done.clone().unsqueeze_dim(0),
-        }
-    }
-
-    /// The runs' batches, in order, as one stack's.
-    pub fn stack(batches: Vec<SacBatch>) -> SacBatch {
-        if batches.len() == 1 {
-            return batches.into_iter().next().expect("one batch");
-        }
-        let field = |f: fn(&SacBatch) -> &Tensor<3>| {
-            Tensor::cat(batches.iter().map(|b| f(b).clone()).collect(), 0)
-        };
-        SacBatch {
-            actor_input: field(|b| &b.actor_input),
-            critic_input: field(|b| &b.critic_input),
-            action: field(|b| &b.action),
-            reward: field(|b| &b.reward),
-            next_actor_input: field(|b| &b.next_actor_input),
-            next_critic_input: field(|b| &b.next_critic_input),
-            done: field(|b| &b.done),
+            actor_input,
+            critic_input,
+            action: t.action.clone(),
+            reward: t.reward.clone(),
+            next_actor_input,
+            next_critic_input,
+            done: t.done.clone(),
         }
     }
 
     /// Rows per run.
-    fn rows(&self) -> usize {
+    pub fn rows(&self) -> usize {
         self.reward.dims()[1]
     }
 }
@@ -305,12 +286,6 @@ impl SacLearner {
     /// `[S, rows, A]` standard normal draws, each run's from its own stream.
     fn normal(&mut self, rows: usize) -> Tensor<3> {
         Noise::stacked_normal(&mut self.noise, rows, self.act_dim, &self.devices.plain)
-    }
-
-    /// A sampled action `a ~ π(·|input)` per row of each run, `[S, B, A]` (no graph).
-    pub fn explore(&mut self, input: Tensor<3>) -> Tensor<3> {
-        let eps = self.normal(input.dims()[1]);
-        self.actor.valid().sample(input, eps, &self.scale).action
     }
 
     /// The deterministic action `tanh(μ)` per row, `[S, B, A]`.
@@ -481,19 +456,15 @@ impl SacLearner {
             .collect()
     }
 
-    /// One update of every run, run `i`'s batch drawn from `contexts[i]` and made into its
-    /// [`SacBatch`] by `batch`; each run's statistics as `train.csv` columns.
+    /// One update of every run, run `i`'s batch drawn from `contexts[i]`, the runs' batches
+    /// made into one [`SacBatch`] by `batch`; each run's statistics as `train.csv` columns.
     pub fn update_runs(
         &mut self,
         contexts: &mut [UpdateContext<'_>],
-        batch: impl Fn(&Transitions, &Device) -> SacBatch,
+        batch: impl Fn(&[Transitions], &Device) -> SacBatch,
     ) -> Result<Vec<Stats>, ReplayError> {
-        let plain = self.devices.plain.clone();
-        let batches = contexts
-            .iter_mut()
-            .map(|ctx| Ok(batch(&ctx.batch()?, &plain)))
-            .collect::<Result<Vec<_>, ReplayError>>()?;
-        let stats = self.update(&SacBatch::stack(batches));
+        let batches = UpdateContext::batches(contexts)?;
+        let stats = self.update(&batch(&batches, &self.devices.plain));
         Ok(stats.iter().map(SacStats::named).collect())
     }
 
@@ -537,7 +508,7 @@ impl SacLearner {
 }
 
 /// A `[S]` tensor's values, one per run.
-fn per_run(values: Tensor<1>) -> Vec<f64> {
+pub(super) fn per_run(values: Tensor<1>) -> Vec<f64> {
     to_vec(values.inner()).into_iter().map(f64::from).collect()
 }
 
@@ -628,16 +599,23 @@ impl SacAgent {
         }
     }
 
-    /// One run's batch on `view`.
-    fn batch(view: InputView, spec: &AgentSpec, batch: &Transitions, plain: &Device) -> SacBatch {
-        let (input, next_input) = view.of_batch(batch, spec);
+    /// The runs' batches on `view`.
+    fn batch(
+        view: InputView,
+        spec: &AgentSpec,
+        batches: &[Transitions],
+        plain: &Device,
+    ) -> SacBatch {
+        let (inputs, next_inputs): (Vec<_>, Vec<_>) = batches
+            .iter()
+            .map(|batch| view.of_batch(batch, spec))
+            .unzip();
         let (input, next_input) = (
-            rows(input, batch.len(), plain),
-            rows(next_input, batch.len(), plain),
+            stacked_rows(inputs.iter().map(Vec::as_slice), batches, plain),
+            stacked_rows(next_inputs.iter().map(Vec::as_slice), batches, plain),
         );
-        let tensors = TransitionTensors::new(batch, plain);
         SacBatch::new(
-            &tensors,
+            &TransitionTensors::stacked(batches, plain),
             (input.clone(), next_input.clone()),
             (input, next_input),
         )
@@ -680,8 +658,8 @@ impl Agent for SacAgent {
         contexts: &mut [UpdateContext<'_>],
     ) -> Result<Vec<Stats>, ReplayError> {
         let (view, spec) = (self.view, &self.spec);
-        self.learner.update_runs(contexts, |batch, plain| {
-            SacAgent::batch(view, spec, batch, plain)
+        self.learner.update_runs(contexts, |batches, plain| {
+            SacAgent::batch(view, spec, batches, plain)
         })
     }
 

@@ -643,7 +643,7 @@ impl Agent for Vdpo {
             matrix(batch.intermediate_states, n * delay, obs, &plain).reshape([n, delay, obs]);
         stats.push((
             RECONSTRUCTION_STAT,
-            self.update_belief(tensors.augmented, truth, ctx.updates),
+            self.update_belief(tensors.augmented.squeeze_dim(0), truth, ctx.updates),
         ));
 
         // 3. The cloning stage, on its schedule.

@@ -112,20 +112,19 @@ pub fn polyak<M: Module>(target: M, online: &M, tau: f64) -> M {
 /// The lifting loss (Eq. 4 of the DHRL paper): the squared distance between the per-dimension
 /// mean and standard deviation of the regular policy's squashed actions at `x` and those of
 /// the abstract (here: delay-free) policy at `s`, `‖E[a↑] − E[ā]‖² + ‖σ[a↑] − σ[ā]‖²`, averaged
-/// over the batch. Both sides are `[K, B, A]`: K samples per state, standard deviations with
-/// the N − 1 correction. `abstract_actions` is a constant (plain tensor): the gradient flows
-/// into the regular policy only.
-pub fn lifting_loss(regular_actions: Tensor<3>, abstract_actions: Tensor<3>) -> Tensor<1> {
+/// over each run's batch, per run `[S]`. Both sides are `[K, S, B, A]`: K samples per state,
+/// standard deviations with the N − 1 correction. `abstract_actions` is a constant (plain
+/// tensor): the gradient flows into the regular policy only.
+pub fn lifting_loss(regular_actions: Tensor<4>, abstract_actions: Tensor<4>) -> Tensor<1> {
     let (mean_r, std_r) = action_moments(regular_actions);
     let (mean_a, std_a) = action_moments(abstract_actions);
-    ((mean_r - mean_a).square() + (std_r - std_a).square())
-        .sum_dim(2)
-        .mean()
+    let per_state = ((mean_r - mean_a).square() + (std_r - std_a).square()).sum_dim(3);
+    batch_mean(per_state.squeeze_dim(0))
 }
 
-/// Per-state mean and standard deviation (N − 1) over the K samples of `[K, B, A]` actions,
-/// each `[1, B, A]`.
-fn action_moments(actions: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
+/// Per-state mean and standard deviation (N − 1) over the K samples of `[K, S, B, A]`
+/// actions, each `[1, S, B, A]`.
+fn action_moments(actions: Tensor<4>) -> (Tensor<4>, Tensor<4>) {
     let k = actions.dims()[0];
     let mean = actions.clone().mean_dim(0);
     let variance = (actions - mean.clone())

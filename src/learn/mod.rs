@@ -28,7 +28,7 @@ pub use noise::Noise;
 pub use stack::{StackedLinear, slice, slice_pack, stack, stack_packs};
 #[cfg(test)]
 pub(crate) use tensors::assert_close;
-pub use tensors::{TransitionTensors, column, matrix, rows, to_vec};
+pub use tensors::{TransitionTensors, matrix, rows, stacked_rows, to_vec};
 
 /// What can go wrong while learning, saving or loading.
 #[derive(Debug, thiserror::Error)]

@@ -1,7 +1,7 @@
 //! Networks: 256-256 ReLU MLPs, a tanh-squashed Gaussian policy, twin Q-networks and the
 //! learned temperature.
 use burn::module::{ModuleVisitor, Param};
-use burn::nn::{Linear, LinearConfig};
+use burn::nn::Linear;
 use burn::optim::{AdamConfig, ModuleOptimizer};
 use burn::prelude::*;
 use burn::tensor::activation::{relu, sigmoid};
@@ -215,22 +215,22 @@ pub fn squashed_sample(
     }
 }
 
-/// `K` squashed actions per row from a distribution already computed (one run's `[B, A]`
-/// mean and log-std), `[K, B, A]`, from `eps` `[K, B, A]`. The K samples lead
-/// (`[K, B, A]`), so that broadcasting `μ`, `σ` over them and reducing over them walk
-/// contiguous `[B, A]` blocks.
+/// `K` squashed actions per row from a distribution already computed (each run's `[B, A]`
+/// mean and log-std, `[S, B, A]`), `[K, S, B, A]`, from `eps` `[K, S, B, A]`. The K samples
+/// lead, so that broadcasting `μ`, `σ` over them and reducing over them walk contiguous
+/// `[S, B, A]` blocks.
 pub fn squashed_samples_k(
-    (mean, log_std): (Tensor<2>, Tensor<2>),
-    eps: Tensor<3>,
+    (mean, log_std): (Tensor<3>, Tensor<3>),
+    eps: Tensor<4>,
     scale: &ActionScale,
-) -> Tensor<3> {
-    let (mean, std): (Tensor<3>, Tensor<3>) =
+) -> Tensor<4> {
+    let (mean, std): (Tensor<4>, Tensor<4>) =
         (mean.unsqueeze_dim(0), log_std.exp().unsqueeze_dim(0));
     let u = mean + std * eps;
     // tanh(u) = 2·σ(2u) − 1, evaluated through the logistic: on B·K·A entries, Flex's tanh
     // (libm's scalar tanhf, called again by its backward) costs about three logistics.
     let squashed = sigmoid(u.mul_scalar(2.0)).mul_scalar(2.0).sub_scalar(1.0);
-    squashed * scale.scale.clone().unsqueeze_dim(0) + scale.bias.clone().unsqueeze_dim(0)
+    squashed * scale.scale.clone().unsqueeze() + scale.bias.clone().unsqueeze()
 }
 
 /// A one-run stack's distribution `([1, B, A], [1, B, A])` as that run's `([B, A], [B, A])`.
@@ -285,7 +285,8 @@ impl MlpConfig {
         }
     }
 
-    /// The network, its layers initialised in order from burn's generator on `device`.
+    /// One run's network, its layers drawn in order from burn's generator on `device` (each as
+    /// burn's `LinearConfig` draws it); [`super::stack`] several for a stack.
     pub fn init(&self, device: &Device) -> Mlp {
         let widths: Vec<usize> = std::iter::once(self.input)
             .chain(self.hidden.iter().copied())
@@ -294,26 +295,26 @@ impl MlpConfig {
         Mlp {
             layers: widths
                 .windows(2)
-                .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+                .map(|w| StackedLinear::new(w[0], w[1], device))
                 .collect(),
         }
     }
 }
 
-/// See [`MlpConfig`].
+/// See [`MlpConfig`]; stacked, inputs `[S, B, input]`.
 #[derive(Module, Debug)]
 pub struct Mlp {
-    pub layers: Vec<Linear>,
+    pub layers: Vec<StackedLinear>,
 }
 
 impl Mlp {
-    /// The layers' weights as plain numbers (for export).
-    pub fn weights(&self) -> Vec<Dense> {
-        self.layers.iter().map(dense).collect()
+    /// Slice `slice`'s layers as plain numbers (for export).
+    pub fn weights(&self, slice: usize) -> Vec<Dense> {
+        self.layers.iter().map(|layer| layer.dense(slice)).collect()
     }
 
-    /// `[B, input]` → `[B, output]`.
-    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+    /// `[S, B, input]` → `[S, B, output]`.
+    pub fn forward(&self, x: Tensor<3>) -> Tensor<3> {
         let last = self.layers.len() - 1;
         self.layers.iter().enumerate().fold(x, |x, (i, layer)| {
             let y = layer.forward(x);

@@ -20,17 +20,6 @@ impl Noise {
         }
     }
 
-    /// A `[k, rows, cols]` tensor of independent N(0, 1) draws: `k` samples of `[rows, cols]`.
-    pub fn normal3(&mut self, k: usize, rows: usize, cols: usize, device: &Device) -> Tensor<3> {
-        let values: Vec<f32> = (0..k * rows * cols)
-            .map(|_| StandardNormal.sample(&mut self.rng))
-            .collect();
-        Tensor::from_data(
-            burn::prelude::TensorData::new(values, [k, rows, cols]),
-            device,
-        )
-    }
-
     /// A uniform draw from `0..n` (`n` ≥ 1).
     pub fn below(&mut self, n: usize) -> usize {
         self.rng.random_range(0..n)
@@ -62,6 +51,35 @@ impl Noise {
             .collect();
         Tensor::from_data(
             burn::prelude::TensorData::new(values, [streams.len(), rows, cols]),
+            device,
+        )
+    }
+
+    /// A `[k, S, rows, cols]` tensor: run `i`'s K samples of `[rows, cols]` draws from
+    /// `streams[i]`, drawn sample after sample as that run draws them alone (S = 1), the samples
+    /// leading.
+    pub fn stacked_normal_k(
+        streams: &mut [Noise],
+        k: usize,
+        rows: usize,
+        cols: usize,
+        device: &Device,
+    ) -> Tensor<4> {
+        let block = rows * cols;
+        let per_run: Vec<Vec<f32>> = streams
+            .iter_mut()
+            .map(|stream| stream.normal_values(k * block))
+            .collect();
+        let values: Vec<f32> = (0..k)
+            .flat_map(|sample| {
+                per_run
+                    .iter()
+                    .flat_map(move |run| &run[sample * block..(sample + 1) * block])
+            })
+            .copied()
+            .collect();
+        Tensor::from_data(
+            burn::prelude::TensorData::new(values, [k, streams.len(), rows, cols]),
             device,
         )
     }

@@ -8,50 +8,68 @@ pub fn matrix(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Te
     Tensor::from_data(TensorData::new(values, [rows, cols]), device)
 }
 
-/// A `[rows, 1]` tensor.
-pub fn column(values: Vec<f32>, device: &Device) -> Tensor<2> {
-    let rows = values.len();
-    matrix(values, rows, 1, device)
-}
-
 /// `[rows, len / rows]` on `device`.
 pub fn rows(values: Vec<f32>, rows: usize, device: &Device) -> Tensor<2> {
     let cols = values.len() / rows.max(1);
     matrix(values, rows, cols, device)
 }
 
-/// A batch of transitions as `[B, ·]` tensors; each algorithm chooses which of them its
-/// networks condition on.
+/// The batches of a stack's runs as `[S, B, ·]` tensors (a solo run's `[1, B, ·]`), one upload
+/// per field; each algorithm chooses which of them its networks condition on.
 #[derive(Debug, Clone)]
 pub struct TransitionTensors {
     /// `x_τ`
-    pub augmented: Tensor<2>,
+    pub augmented: Tensor<3>,
     /// `s_τ`
-    pub state: Tensor<2>,
-    pub action: Tensor<2>,
-    /// `[B, 1]`
-    pub reward: Tensor<2>,
+    pub state: Tensor<3>,
+    pub action: Tensor<3>,
+    /// `[S, B, 1]`
+    pub reward: Tensor<3>,
     /// `x_{τ+1}`
-    pub next_augmented: Tensor<2>,
+    pub next_augmented: Tensor<3>,
     /// `s_{τ+1}`
-    pub next_state: Tensor<2>,
-    /// `[B, 1]`: 1 where the MDP terminated.
-    pub done: Tensor<2>,
+    pub next_state: Tensor<3>,
+    /// `[S, B, 1]`: 1 where the MDP terminated.
+    pub done: Tensor<3>,
 }
 
 impl TransitionTensors {
+    /// One run's batch.
     pub fn new(batch: &Transitions, device: &Device) -> TransitionTensors {
-        let n = batch.len();
+        TransitionTensors::stacked(std::slice::from_ref(batch), device)
+    }
+
+    /// Run `i`'s batch `batches[i]` in slice `i` (all of one size).
+    pub fn stacked(batches: &[Transitions], device: &Device) -> TransitionTensors {
+        let field = |values: fn(&Transitions) -> &[f32]| {
+            stacked_rows(batches.iter().map(values), batches, device)
+        };
+        let done: Vec<Vec<f32>> = batches
+            .iter()
+            .map(|b| b.terminated.iter().map(|&d| d as f32).collect())
+            .collect();
         TransitionTensors {
-            augmented: rows(batch.augmented.clone(), n, device),
-            state: rows(batch.state.clone(), n, device),
-            action: rows(batch.action.clone(), n, device),
-            reward: column(batch.reward.clone(), device),
-            next_augmented: rows(batch.next_augmented.clone(), n, device),
-            next_state: rows(batch.next_state.clone(), n, device),
-            done: column(batch.terminated.iter().map(|&d| d as f32).collect(), device),
+            augmented: field(|b| &b.augmented),
+            state: field(|b| &b.state),
+            action: field(|b| &b.action),
+            reward: field(|b| &b.reward),
+            next_augmented: field(|b| &b.next_augmented),
+            next_state: field(|b| &b.next_state),
+            done: stacked_rows(done.iter().map(Vec::as_slice), batches, device),
         }
     }
+}
+
+/// One field of each run's batch (`runs`, row-major `[B, width]` each) as `[S, B, width]`.
+pub fn stacked_rows<'a>(
+    runs: impl Iterator<Item = &'a [f32]>,
+    batches: &[Transitions],
+    device: &Device,
+) -> Tensor<3> {
+    let values: Vec<f32> = runs.flat_map(|run| run.iter().copied()).collect();
+    let (stack, rows) = (batches.len(), batches[0].len());
+    let width = values.len() / (stack * rows).max(1);
+    Tensor::from_data(TensorData::new(values, [stack, rows, width]), device)
 }
 
 /// The values of a tensor, row-major.
