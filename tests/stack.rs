@@ -12,9 +12,7 @@ use burn::tensor::activation::relu;
 use common::{parameters, small_spec};
 use dhrl::algos::{ActMode, AgentSpec, SacBatch, SacConfig, SacLearner, SacStats, random_batch};
 use dhrl::delay::Transitions;
-use dhrl::learn::{
-    Devices, LearnDevice, StackedLinear, TransitionTensors, materialize, stack, to_vec,
-};
+use dhrl::learn::{Devices, LearnDevice, StackedLinear, TransitionTensors, stack, to_vec};
 
 fn devices() -> Devices {
     Devices::new(LearnDevice::Cpu).unwrap()
@@ -46,8 +44,13 @@ fn stacked_layers_compute_each_runs_solo_values_and_gradients_bit_for_bit() {
                 LinearConfig::new(7, 256).init(&d.train),
                 LinearConfig::new(256, 3).init(&d.train),
             );
-            materialize(&pair.0);
-            materialize(&pair.1);
+            for layer in [&pair.0, &pair.1] {
+                // burn draws a layer's weight, then its bias, when first read.
+                let _ = (
+                    layer.weight.val(),
+                    layer.bias.as_ref().map(|bias| bias.val()),
+                );
+            }
             pair
         })
         .collect();
@@ -298,6 +301,17 @@ fn short_run(
     .to_vec()
 }
 
+/// VDPO made small, with a cloning stage every 200 steps (after the 300 of warm-up: at 400,
+/// 600, …) and dropout in its belief.
+const SMALL_VDPO: [&str; 6] = [
+    "--set",
+    "belief_width=32",
+    "--set",
+    "bc_every=200",
+    "--set",
+    "bc_updates=20",
+];
+
 /// `dhrl ARGS…`, failing the test with its stderr if it fails.
 fn dhrl_ok(args: &[&str]) {
     let out = common::dhrl(args);
@@ -310,25 +324,29 @@ fn dhrl_ok(args: &[&str]) {
 
 /// `dhrl train --seeds 0..3` writes one ordinary run folder per seed, each logging what the
 /// solo run of its seed logs (every column of train.csv and evals.csv but the wall-clock
-/// ones, to the last digit), for the SAC family and BPQL (stacked learners: the CPU's default
-/// passes of two runs and one, and all three in one pass) and for D2HPG and delayed SAC (their
-/// runs side by side); the seeds' runs differ.
+/// ones, to the last digit), for every algorithm family (the CPU's default passes of two runs
+/// and one, or all three in one pass); the seeds' runs differ.
 #[test]
 fn each_run_of_a_stack_logs_exactly_what_its_solo_run_logs() {
-    for (algo, delay, passes) in [
-        ("sac", "0", "0"),
-        ("sac", "0", "3"),
-        ("naive-sac", "2", "0"),
-        ("bpql", "2", "3"),
-        ("d2hpg", "2", "0"),
-        ("d2hpg-naive", "2", "3"),
-        ("d2hpg-principled", "2", "0"),
-        ("delayed-sac", "2", "3"),
+    for (algo, delay, passes, extra) in [
+        ("sac", "0", "0", &[][..]),
+        ("sac", "0", "3", &[]),
+        ("naive-sac", "2", "0", &[]),
+        ("bpql", "2", "3", &[]),
+        ("d2hpg", "2", "0", &[]),
+        ("d2hpg-naive", "2", "3", &[]),
+        ("d2hpg-principled", "2", "0", &[]),
+        ("delayed-sac", "2", "3", &[]),
+        ("vdpo", "2", "3", &SMALL_VDPO[..]),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let stack = dir.path().join("stack");
         let flags = short_run(dir.path(), algo, delay, "600", "64");
-        let flags: Vec<&str> = flags.iter().map(String::as_str).collect();
+        let flags: Vec<&str> = flags
+            .iter()
+            .map(String::as_str)
+            .chain(extra.iter().copied())
+            .collect();
         dhrl_ok(
             &[
                 &["train"],
@@ -366,12 +384,16 @@ fn each_run_of_a_stack_logs_exactly_what_its_solo_run_logs() {
 /// stack trained to 1200 at once logs, run by run.
 #[test]
 fn a_resumed_stack_continues_exactly() {
-    for algo in ["bpql", "d2hpg"] {
+    for (algo, extra) in [("bpql", &[][..]), ("d2hpg", &[]), ("vdpo", &SMALL_VDPO[..])] {
         let dir = tempfile::tempdir().unwrap();
         let (straight, resumed) = (dir.path().join("straight"), dir.path().join("resumed"));
         for (steps, out) in [("1200", &straight), ("600", &resumed)] {
             let flags = short_run(dir.path(), algo, "2", steps, "64");
-            let flags: Vec<&str> = flags.iter().map(String::as_str).collect();
+            let flags: Vec<&str> = flags
+                .iter()
+                .map(String::as_str)
+                .chain(extra.iter().copied())
+                .collect();
             dhrl_ok(
                 &[
                     &["train"],

@@ -1,6 +1,6 @@
 //! burn's wgpu learner (cargo feature `wgpu-learner`) against the CPU reference: every
-//! algorithm's updates agree with Flex's from the same networks and batches, and SAC learns
-//! InvertedPendulum end to end on wgpu.
+//! algorithm's stacked updates agree with Flex's from the same networks and batches, and SAC
+//! learns InvertedPendulum end to end on wgpu.
 //!
 //! They run on a real GPU adapter, or on a software one opted into with
 //! `DHRL_WGPU_SOFTWARE=vulkan` (Mesa's lavapipe: what `scripts/test.sh`, and so CI, does);
@@ -10,9 +10,7 @@
 
 mod common;
 
-use dhrl::algos::{
-    ActMode, AgentSpec, AlgoSettings, UpdateContext, names, names_where, random_batch,
-};
+use dhrl::algos::{ActMode, Agent, AgentSpec, AlgoSettings, UpdateContext, names, random_batch};
 use dhrl::learn::{Devices, LearnDevice, SOFTWARE_WGPU, real_gpu_adapters};
 
 /// One test on the device at a time: on a software adapter (Mesa's lavapipe spreads each
@@ -51,13 +49,17 @@ fn both_devices() -> (Devices, Devices) {
     )
 }
 
-/// `algo`'s default settings, without dropout: dropout masks come from each backend's own
-/// generator (the same seed draws other masks on wgpu than on Flex), so the devices are
-/// compared without it; the rest is deterministic.
-fn settings_without_dropout(algo: &str) -> AlgoSettings {
+/// `algo`'s default settings, made small where it has the fields: VDPO's transformer one
+/// block deep and its cloning stage two steps long (on a software adapter every new shape
+/// costs kernel compilation). Dropout stays: its masks are drawn on the host, the same on
+/// both devices.
+fn small_settings(algo: &str) -> AlgoSettings {
     let mut settings = AlgoSettings::new(algo).unwrap();
-    if settings.fields().contains_key("dropout") {
-        settings.set("dropout=0.0").unwrap();
+    for assignment in ["belief_blocks=1", "bc_updates=2"] {
+        let field = assignment.split('=').next().unwrap();
+        if settings.fields().contains_key(field) {
+            settings.set(assignment).unwrap();
+        }
     }
     settings
 }
@@ -94,102 +96,13 @@ fn assert_actions_close(a: &[f32], b: &[f32], what: &str) {
 /// sum in other orders (tiled GPU products against gemm's), which moves f32 results by
 /// ~1e-6 per operation, and five Adam steps on tiny gradients amplify that. A wgpu agent
 /// saved and loaded on the CPU acts as it did on wgpu (to the same tolerance).
-#[test]
-fn every_algorithm_updates_the_same_on_wgpu_as_on_cpu() {
-    let _device = DEVICE.lock().unwrap_or_else(|e| e.into_inner());
-    if !gpu_present("every_algorithm_updates_the_same_on_wgpu_as_on_cpu") {
-        return;
-    }
-    let (cpu, gpu) = both_devices();
-    for algo in names() {
-        let settings = settings_without_dropout(algo);
-        let spec = spec(if settings.info().undelayed_only { 0 } else { 3 });
-        let mut on_cpu = settings.build(&spec, &cpu, 7);
-        let mut on_gpu = settings.build(&spec, &gpu, 7);
-        let saved = tempfile::tempdir().unwrap();
-        on_cpu.save(saved.path()).unwrap();
-        on_gpu.load(saved.path()).unwrap();
-        for step in 0..5 {
-            let batch = random_batch(&spec, 64, 100 + step);
-            let (a, b) = (
-                common::update(on_cpu.as_mut(), &batch),
-                common::update(on_gpu.as_mut(), &batch),
-            );
-            assert_eq!(
-                a.len(),
-                b.len(),
-                "{algo}: statistics {a:?} on CPU, {b:?} on wgpu"
-            );
-            assert!(!a.is_empty(), "{algo}: an update reports its losses");
-            for ((name, x), (other, y)) in a.iter().zip(&b) {
-                assert_eq!(name, other);
-                assert!(
-                    close(*x, *y, 1e-3),
-                    "{algo} update {step}: {name} {x} on CPU, {y} on wgpu"
-                );
-            }
-        }
-        let probe = random_batch(&spec, 16, 9);
-        let (a, b) = (
-            on_cpu.act(&probe.augmented, 16, ActMode::Deterministic),
-            on_gpu.act(&probe.augmented, 16, ActMode::Deterministic),
-        );
-        assert_eq!(
-            (a.len(), b.len()),
-            (16 * 2, 16 * 2),
-            "{algo}: one action per state"
-        );
-        assert_actions_close(
-            &a,
-            &b,
-            &format!("{algo}: deterministic actions on CPU, on wgpu"),
-        );
-        // Sampled actions: the noise is drawn on the host from the stream both agents carry.
-        let (a, b) = (
-            on_cpu.act(&probe.augmented, 16, ActMode::Explore),
-            on_gpu.act(&probe.augmented, 16, ActMode::Explore),
-        );
-        assert_actions_close(&a, &b, &format!("{algo}: sampled actions on CPU, on wgpu"));
-        // Saved on wgpu, loaded on the CPU: the same policy.
-        let from_gpu = tempfile::tempdir().unwrap();
-        on_gpu.save(from_gpu.path()).unwrap();
-        let mut reloaded = settings.build(&spec, &cpu, 8);
-        reloaded.load(from_gpu.path()).unwrap();
-        let (a, b) = (
-            on_gpu.act(&probe.augmented, 16, ActMode::Deterministic),
-            reloaded.act(&probe.augmented, 16, ActMode::Deterministic),
-        );
-        assert_actions_close(
-            &a,
-            &b,
-            &format!("{algo}: actions on wgpu, saved and loaded on the CPU"),
-        );
-        let learns_delay_free = settings.info().delay_free_policy;
-        let (reference, free) = (
-            on_cpu.act_delay_free(&probe.state, 16),
-            on_gpu.act_delay_free(&probe.state, 16),
-        );
-        assert_eq!(
-            (reference.is_some(), free.is_some()),
-            (learns_delay_free, learns_delay_free),
-            "{algo}: a delay-free policy on CPU and on wgpu exactly for the D2HPG variants"
-        );
-        if let (Some(reference), Some(free)) = (reference, free) {
-            assert_eq!((reference.len(), free.len()), (16 * 2, 16 * 2));
-            assert_actions_close(
-                &reference,
-                &free,
-                &format!("{algo}: delay-free actions on CPU, on wgpu"),
-            );
-        }
-    }
-}
-
-/// A stack of two runs on both devices (each run's networks, optimisers and noise saved on
-/// the CPU and loaded onto the GPU): every run's statistics of two updates, each run on its
-/// own batches, and each run's actions agree within the 1e-3 above, for every algorithm with
-/// stacked learners (the others' runs are solo agents side by side, which the test above
-/// covers; on a software adapter each algorithm's shapes cost minutes of kernel compilation).
+/// Every algorithm as a stack of two runs on both devices (each run's networks, optimisers and
+/// noise saved on the CPU and loaded onto the GPU; a solo run is the stack of one of the same
+/// code): every run's statistics of two updates, each run on its own batches, agree within
+/// 1e-3, the second update at 1,000 environment steps so that every stage runs and reports
+/// (VDPO's reference actor and temperature and its cloning stage); so do each run's
+/// deterministic and sampled actions, the delay-free policy's actions where there is one, and
+/// the actions of runs saved on wgpu and loaded on the CPU.
 #[test]
 fn every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu() {
     let _device = DEVICE.lock().unwrap_or_else(|e| e.into_inner());
@@ -197,36 +110,46 @@ fn every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu() {
         return;
     }
     let (cpu, gpu) = both_devices();
-    let stacked = names_where(|info| info.stacked_learner);
-    assert!(!stacked.is_empty(), "no algorithm has stacked learners");
-    for algo in stacked {
-        let settings = settings_without_dropout(algo);
+    for algo in names() {
+        let settings = small_settings(algo);
         let spec = spec(if settings.info().undelayed_only { 0 } else { 3 });
         let mut on_cpu = settings.build_stack(&spec, &cpu, &[7, 8]);
-        let mut on_gpu = settings.build_stack(&spec, &gpu, &[1, 2]);
+        // The same seeds: VDPO's dropout streams are keyed on them (the rest is loaded).
+        let mut on_gpu = settings.build_stack(&spec, &gpu, &[7, 8]);
         assert_eq!((on_cpu.runs(), on_gpu.runs()), (2, 2), "{algo}");
         let saved = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
         let dirs: Vec<&std::path::Path> = saved.iter().map(|d| d.path()).collect();
         on_cpu.save_runs(&dirs).unwrap();
         on_gpu.load_runs(&dirs).unwrap();
-        for step in 0..2 {
+        for step in 0..2u64 {
             // 16 rows a run: the stacked products are what is checked, and on a software
             // adapter every row costs.
             let batches = [
                 random_batch(&spec, 16, 100 + step),
                 random_batch(&spec, 16, 200 + step),
             ];
-            let update = |agent: &mut dyn dhrl::algos::Agent| {
+            let update = |agent: &mut dyn Agent| {
                 let mut contexts: Vec<UpdateContext> = batches
                     .iter()
-                    .map(|batch| UpdateContext::fixed(batch, 0, 0))
+                    .map(|batch| UpdateContext::fixed(batch, 1000 * step, step))
                     .collect();
                 agent.update_runs(&mut contexts).unwrap()
             };
             let (a, b) = (update(on_cpu.as_mut()), update(on_gpu.as_mut()));
             assert_eq!(a.len(), 2, "{algo}: one set of statistics per run");
             assert_ne!(a[0], a[1], "{algo}: the runs' batches and networks differ");
+            if step == 1 {
+                let mut reported: Vec<&str> = a[0].iter().map(|(name, _)| *name).collect();
+                let mut named = on_cpu.stat_names();
+                reported.sort();
+                named.sort();
+                assert_eq!(
+                    reported, named,
+                    "{algo}: every stage ran in the second update"
+                );
+            }
             for (run, (a, b)) in a.iter().zip(&b).enumerate() {
+                assert_eq!(a.len(), b.len(), "{algo}: {a:?} on CPU, {b:?} on wgpu");
                 for ((name, x), (other, y)) in a.iter().zip(b) {
                     assert_eq!(name, other);
                     assert!(
@@ -237,15 +160,49 @@ fn every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu() {
             }
         }
         let probe = random_batch(&spec, 16, 9);
+        let from_gpu = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
+        let dirs: Vec<&std::path::Path> = from_gpu.iter().map(|d| d.path()).collect();
+        on_gpu.save_runs(&dirs).unwrap();
+        let mut reloaded = settings.build_stack(&spec, &cpu, &[3, 4]);
+        reloaded.load_runs(&dirs).unwrap();
         for run in 0..2 {
+            let act =
+                |agent: &mut Box<dyn Agent>, mode| agent.act_run(run, &probe.augmented, 16, mode);
+            for mode in [ActMode::Deterministic, ActMode::Explore] {
+                // Sampled actions: the noise is drawn on the host from each run's stream.
+                let (a, b) = (act(&mut on_cpu, mode), act(&mut on_gpu, mode));
+                assert_eq!(
+                    (a.len(), b.len()),
+                    (16 * 2, 16 * 2),
+                    "{algo}: an action a row"
+                );
+                assert_actions_close(&a, &b, &format!("{algo} run {run}: {mode:?} on CPU, wgpu"));
+            }
             let (a, b) = (
-                on_cpu.act_run(run, &probe.augmented, 16, ActMode::Deterministic),
-                on_gpu.act_run(run, &probe.augmented, 16, ActMode::Deterministic),
+                act(&mut on_gpu, ActMode::Deterministic),
+                act(&mut reloaded, ActMode::Deterministic),
             );
             assert_actions_close(
                 &a,
                 &b,
-                &format!("{algo} run {run}: actions on CPU, on wgpu"),
+                &format!("{algo} run {run}: on wgpu, saved and loaded on the CPU"),
+            );
+        }
+        let learns_delay_free = settings.info().delay_free_policy;
+        let (reference, free) = (
+            on_cpu.act_delay_free(&probe.state, 16),
+            on_gpu.act_delay_free(&probe.state, 16),
+        );
+        assert_eq!(
+            (reference.is_some(), free.is_some()),
+            (learns_delay_free, learns_delay_free),
+            "{algo}: a delay-free policy on CPU and on wgpu exactly where one is learned"
+        );
+        if let (Some(reference), Some(free)) = (reference, free) {
+            assert_actions_close(
+                &reference,
+                &free,
+                &format!("{algo}: delay-free actions on CPU, on wgpu"),
             );
         }
     }

@@ -58,69 +58,55 @@ pub enum ActMode {
 pub type Stats = Vec<(&'static str, f64)>;
 
 /// What the training loop needs of an algorithm: a stack of S runs of one configuration, their
-/// seeds apart, trained side by side, each with its own batches, random streams and folder. A
-/// solo agent (S = 1) implements the one-run methods (`act`, `update`, `save`, `load`); a
-/// stacked one implements `runs` and the per-run methods (`act_run`, `update_runs`,
-/// `save_runs`, `load_runs`); each set's defaults are the other's, so implement one of them.
+/// seeds apart, trained side by side, each with its own batches, random streams and folder (a
+/// solo run is S = 1). The one-run methods (`act`, `update`, `save`, `load`) are run 0's, for
+/// a solo agent.
 pub trait Agent: Send {
-    /// Actions `[rows, act_dim]` for `rows` augmented states `[rows, obs + Δ·act]` (run 0's).
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.act_run(0, augmented, rows, mode)
-    }
-    /// Deterministic actions of the delay-free policy for `rows` true states `[rows, obs]`,
-    /// evaluated undelayed; `None` unless [`AlgoInfo::delay_free_policy`] says there is one.
-    fn act_delay_free(&mut self, _states: &[f32], _rows: usize) -> Option<Vec<f32>> {
-        None
-    }
-    /// The statistics [`Agent::update`] may report, in `train.csv`'s column order.
+    /// How many runs the agent trains side by side.
+    fn runs(&self) -> usize;
+    /// Actions `[rows, act_dim]` of run `run` for `rows` augmented states
+    /// `[rows, obs + Δ·act]`.
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32>;
+    /// One update of every run, run `i` drawing its batches from `contexts[i]` (as many as it
+    /// needs); each run's statistics computed this time (an absent one is logged empty).
+    fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<Vec<Stats>, ReplayError>;
+    /// Run `i`'s networks, optimiser states and random streams into `dirs[i]`, each as a solo
+    /// run of its seed writes them.
+    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError>;
+    /// Restores run `i` from `dirs[i]` (what [`Agent::save_runs`] or a solo run wrote).
+    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError>;
+    /// The statistics an update may report, in `train.csv`'s column order.
     fn stat_names(&self) -> Vec<&'static str>;
     /// The optional batch fields the agent samples (none by default).
     fn batch_extras(&self) -> BatchExtras {
         BatchExtras::default()
     }
-    /// One update of every learner: draws its batches from `ctx` (as many as it needs),
-    /// returns the statistics it computed this time (an absent one is logged empty).
+    /// What run 0 computes in [`ActMode::Deterministic`], as plain numbers (`dhrl export`).
+    fn acting_network(&self) -> ActingNetwork;
+    /// Deterministic actions of run 0's delay-free policy for `rows` true states `[rows, obs]`,
+    /// evaluated undelayed; `None` unless [`AlgoInfo::delay_free_policy`] says there is one.
+    fn act_delay_free(&mut self, _states: &[f32], _rows: usize) -> Option<Vec<f32>> {
+        None
+    }
+
+    /// [`Agent::act_run`] of run 0.
+    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+        self.act_run(0, augmented, rows, mode)
+    }
+    /// [`Agent::update_runs`] of a solo agent.
     fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
         Ok(self.update_runs(std::slice::from_mut(ctx))?.remove(0))
     }
-    /// Networks, optimiser states and random streams, into `dir`.
+    /// [`Agent::save_runs`] of a solo agent.
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
         self.save_runs(&[dir])
     }
-    /// Restores what [`Agent::save`] wrote.
+    /// [`Agent::load_runs`] of a solo agent.
     fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
         self.load_runs(&[dir])
-    }
-    /// What [`Agent::act`] computes in [`ActMode::Deterministic`], as plain numbers (`dhrl
-    /// export`).
-    fn acting_network(&self) -> ActingNetwork;
-
-    /// How many runs the agent trains side by side.
-    fn runs(&self) -> usize {
-        1
-    }
-    /// [`Agent::act`] for run `run`.
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        assert_eq!(run, 0, "a solo agent has run 0 only");
-        self.act(augmented, rows, mode)
-    }
-    /// One update of every run, run `i` drawing from `contexts[i]`; each run's statistics.
-    fn update_runs(
-        &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError> {
-        assert_eq!(contexts.len(), 1, "a solo agent updates one run");
-        Ok(vec![self.update(&mut contexts[0])?])
-    }
-    /// [`Agent::save`] of run `i` into `dirs[i]`, each as a solo run of its seed writes it.
-    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
-        assert_eq!(dirs.len(), 1, "a solo agent saves one run");
-        self.save(dirs[0])
-    }
-    /// Restores run `i` from `dirs[i]` (what [`Agent::save_runs`] or a solo run wrote).
-    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
-        assert_eq!(dirs.len(), 1, "a solo agent loads one run");
-        self.load(dirs[0])
     }
 }
 
@@ -176,9 +162,6 @@ pub struct AlgoInfo {
     pub delayed_only: bool,
     /// Learners updated side by side (rayon threads an update can use to advantage).
     pub learner_threads: usize,
-    /// Whether its learners are stacked ([`AlgoConfig::build_stack`] builds one learner that
-    /// serves all the runs of a stack in one pass); otherwise a stack's runs go side by side.
-    pub stacked_learner: bool,
     /// Fields shown in plot labels: `(symbol, field)`, e.g. `("λ", "lifting_weight")`.
     pub label_fields: &'static [(&'static str, &'static str)],
 }
@@ -202,7 +185,6 @@ impl AlgoInfo {
             undelayed_only: false,
             delayed_only: false,
             learner_threads: 1,
-            stacked_learner: false,
             label_fields: &[],
         }
     }
@@ -298,21 +280,13 @@ pub trait AlgoConfig:
     const INFO: AlgoInfo;
     /// Checks every field, with errors that say what is accepted.
     fn validate(&self) -> Result<(), AlgoError>;
-    /// The agent, for tasks of `spec`'s sizes, seeded with `seed`.
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent>;
-    /// The runs of `seeds` as one agent ([`Agent::runs`] = `seeds.len()`): by default each
-    /// run its own solo agent, updated one after the other; an algorithm whose learners are
-    /// stacked ([`crate::learn::stack`]) builds one learner for all of them.
-    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
-        match seeds {
-            [seed] => self.build(spec, devices, *seed),
-            _ => Box::new(super::independent::Independent::new(
-                seeds
-                    .iter()
-                    .map(|&seed| self.build(spec, devices, seed))
-                    .collect(),
-            )),
-        }
+    /// The runs of `seeds` as one agent ([`Agent::runs`] = `seeds.len()`), for tasks of
+    /// `spec`'s sizes: its learners stacked ([`crate::learn::stack`]), one pass serving every
+    /// run, run `i` computing what a solo run of `seeds[i]` computes.
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent>;
+    /// One run's agent, seeded with `seed`: a stack of one.
+    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
+        self.build_stack(spec, devices, &[seed])
     }
 }
 

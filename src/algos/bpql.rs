@@ -30,7 +30,6 @@ crate::algo_config! {
 impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo {
         in_lifting_ablation: true,
-        stacked_learner: true,
         ..AlgoInfo::single_learner(
             "bpql",
             "BPQL",
@@ -41,10 +40,6 @@ impl AlgoConfig for Config {
 
     fn validate(&self) -> Result<(), AlgoError> {
         self.sac.check(Self::INFO.name)
-    }
-
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        self.build_stack(spec, devices, &[seed])
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {

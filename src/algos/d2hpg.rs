@@ -87,7 +87,6 @@ const D2HPG_INFO: AlgoInfo = AlgoInfo {
     undelayed_only: false,
     delayed_only: false,
     learner_threads: 2,
-    stacked_learner: true,
     label_fields: &[("λ", "lifting_weight"), ("K", "lifting_samples")],
 };
 
@@ -96,10 +95,6 @@ impl AlgoConfig for Config {
 
     fn validate(&self) -> Result<(), AlgoError> {
         self.check(Self::INFO.name)
-    }
-
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        self.build_stack(spec, devices, &[seed])
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -129,10 +124,6 @@ impl AlgoConfig for NaiveConfig {
 
     fn validate(&self) -> Result<(), AlgoError> {
         self.0.check(Self::INFO.name)
-    }
-
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        self.build_stack(spec, devices, &[seed])
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -195,14 +186,7 @@ impl D2hpg {
             lifting_weight: config.lifting_weight,
             lifting_samples: config.lifting_samples,
             regular: bpql_learner(spec, &config.sac, devices, seeds),
-            delay_free: SacLearner::stacked(
-                spec.obs_dim,
-                spec.obs_dim,
-                spec,
-                &config.sac,
-                devices,
-                &free_seeds,
-            ),
+            delay_free: SacLearner::on_state(spec, &config.sac, devices, &free_seeds),
             lifting_noise: seeds
                 .iter()
                 .map(|&seed| Noise::new(seeds::lifting_noise(seed)))

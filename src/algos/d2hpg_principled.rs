@@ -175,7 +175,6 @@ impl AlgoConfig for Config {
         undelayed_only: false,
         delayed_only: false,
         learner_threads: 2,
-        stacked_learner: true,
         label_fields: &[
             ("λ", "lifting_weight"),
             ("d", "latent_dim"),
@@ -210,10 +209,6 @@ impl AlgoConfig for Config {
             self.lax_weight,
         )?;
         check_lifting(algo, self.lifting_weight, self.lifting_samples)
-    }
-
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        self.build_stack(spec, devices, &[seed])
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -488,9 +483,7 @@ impl D2hpgPrincipled {
             devices,
             seeds,
         );
-        let abstract_learner = SacLearner::stacked(
-            config.latent_dim,
-            config.latent_dim,
+        let abstract_learner = SacLearner::on_state(
             &abstract_spec,
             &config.sac,
             devices,

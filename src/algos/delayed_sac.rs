@@ -63,15 +63,12 @@ crate::algo_config! {
 }
 
 impl AlgoConfig for Config {
-    const INFO: AlgoInfo = AlgoInfo {
-        stacked_learner: true,
-        ..AlgoInfo::single_learner(
-            "delayed-sac",
-            "Delayed SAC",
-            "SAC on s_t, acting on the state a learned one-step model predicts over the Δ pending actions",
-            false,
-        )
-    };
+    const INFO: AlgoInfo = AlgoInfo::single_learner(
+        "delayed-sac",
+        "Delayed SAC",
+        "SAC on s_t, acting on the state a learned one-step model predicts over the Δ pending actions",
+        false,
+    );
 
     fn validate(&self) -> Result<(), AlgoError> {
         let algo = Self::INFO.name;
@@ -90,10 +87,6 @@ impl AlgoConfig for Config {
             "a positive number",
             self.model_learning_rate,
         )
-    }
-
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        self.build_stack(spec, devices, &[seed])
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -249,14 +242,7 @@ pub struct DelayedSac {
 impl DelayedSac {
     /// The runs of `seeds`: each run's model drawn after seeding the device with its own seed.
     pub fn new(config: &Config, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> DelayedSac {
-        let learner = SacLearner::stacked(
-            spec.obs_dim,
-            spec.obs_dim,
-            spec,
-            &config.sac,
-            devices,
-            seeds,
-        );
+        let learner = SacLearner::on_state(spec, &config.sac, devices, seeds);
         let width = spec.obs_dim + spec.act_dim;
         let network = stack(
             seeds

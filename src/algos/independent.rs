@@ -1,6 +1,5 @@
-//! A stack of agents trained side by side, one after the other: the runs of an algorithm
-//! whose learners are not stacked (each agent one run), or a stack served in several learner
-//! passes (each agent a stack of a few runs). Every run computes exactly what it computes alone.
+//! A stack served in several learner passes (`--runs-per-pass`): stacks of a few runs each,
+//! updated one after the other. Every run computes exactly what it computes alone.
 use std::path::Path;
 
 use super::agent::{ActMode, Agent, Stats};
@@ -15,7 +14,7 @@ pub struct Independent {
 }
 
 impl Independent {
-    /// The agents, in run order; all of one algorithm and configuration.
+    /// The stacks, in run order; all of one algorithm and configuration.
     pub fn new(agents: Vec<Box<dyn Agent>>) -> Independent {
         assert!(!agents.is_empty(), "a stack of at least one run");
         Independent { agents }

@@ -15,22 +15,15 @@ crate::algo_config! {
 }
 
 impl AlgoConfig for Config {
-    const INFO: AlgoInfo = AlgoInfo {
-        stacked_learner: true,
-        ..AlgoInfo::single_learner(
-            "naive-sac",
-            "Naive SAC",
-            "SAC on the last received observation s_{t-Δ} only (memoryless)",
-            false,
-        )
-    };
+    const INFO: AlgoInfo = AlgoInfo::single_learner(
+        "naive-sac",
+        "Naive SAC",
+        "SAC on the last received observation s_{t-Δ} only (memoryless)",
+        false,
+    );
 
     fn validate(&self) -> Result<(), AlgoError> {
         self.sac.check(Self::INFO.name)
-    }
-
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        self.build_stack(spec, devices, &[seed])
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {

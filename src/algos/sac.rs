@@ -88,7 +88,6 @@ impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo {
         undelayed_only: true,
         role: Role::Reference,
-        stacked_learner: true,
         ..AlgoInfo::single_learner(
             "sac",
             "Delay-free SAC",
@@ -99,10 +98,6 @@ impl AlgoConfig for Config {
 
     fn validate(&self) -> Result<(), AlgoError> {
         self.check(Self::INFO.name)
-    }
-
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        self.build_stack(spec, devices, &[seed])
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -276,6 +271,17 @@ impl SacLearner {
                 .collect(),
             act_dim: spec.act_dim,
         }
+    }
+
+    /// [`SacLearner::stacked`] with the actor and the critics both on the state of `spec`
+    /// (`obs_dim` entries): a delay-free SAC.
+    pub fn on_state(
+        spec: &AgentSpec,
+        hyper: &Config,
+        devices: &Devices,
+        seeds: &[u64],
+    ) -> SacLearner {
+        SacLearner::stacked(spec.obs_dim, spec.obs_dim, spec, hyper, devices, seeds)
     }
 
     /// How many runs the stack holds.

@@ -33,27 +33,26 @@
 //! without dropout (it is off the graph; the reference keeps it in training mode).
 use std::path::Path;
 
-use burn::module::Module;
-use burn::nn::attention::MultiHeadAttention;
+use burn::module::{Module, Param};
 use burn::nn::attention::generate_autoregressive_mask;
 use burn::nn::transformer::{TransformerEncoder, TransformerEncoderConfig};
-use burn::nn::{Embedding, EmbeddingConfig, LayerNorm, LayerNormConfig, Linear, LinearConfig};
+use burn::nn::{EmbeddingConfig, LayerNormConfig};
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
-use burn::tensor::activation::softmax;
+use burn::tensor::activation::{gelu, softmax};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, check};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, LearningRates, SacBatch, SacLearner};
+use super::sac::{Config as SacConfig, LearningRates, SacBatch, SacLearner, per_run};
 use crate::acting::{ActingNetwork, BeliefTransformer, TransformerBlock};
 use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::{
-    ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, TransitionTensors,
-    adam, dense, load_optimizer_stack, load_stack, materialize, matrix, norm, one_run, rows,
-    to_vec,
+    ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, StackedLayerNorm,
+    StackedLinear, TransitionTensors, adam, load_optimizer_stack, load_stack, slice, stack,
+    stacked_rows, to_vec,
 };
 use crate::seeds;
 
@@ -168,129 +167,290 @@ impl AlgoConfig for Config {
         )
     }
 
-    fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
-        Box::new(Vdpo::new(self, spec, devices, seed))
+    fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
+        Box::new(Vdpo::new(self, spec, devices, seeds))
     }
 }
 
-/// The belief network up to its last LayerNorm, and its decoder head.
+/// Token positions' embeddings, `[S, Δ, width]` (burn's `Embedding` of Δ entries per run).
+#[derive(Module, Debug)]
+pub struct Positions {
+    pub weight: Param<Tensor<3>>,
+}
+
+/// The belief network up to its last LayerNorm, and its decoder head, for each run of a stack
+/// (fields named as burn's modules, so that a run's record is a solo run's).
 #[derive(Module, Debug)]
 pub struct Belief {
-    state_embedding: Linear,
-    action_embedding: Linear,
+    state_embedding: StackedLinear,
+    action_embedding: StackedLinear,
     /// `[embed(s); embed(a_i)]` → token.
-    token: Linear,
-    position: Embedding,
-    input_norm: LayerNorm,
-    encoder: TransformerEncoder,
-    output_norm: LayerNorm,
+    token: StackedLinear,
+    position: Positions,
+    input_norm: StackedLayerNorm,
+    encoder: Encoder,
+    output_norm: StackedLayerNorm,
     /// Token `i` → `ŝ_{t−Δ+1+i}`.
-    decoder: Linear,
+    decoder: StackedLinear,
 }
 
 impl Belief {
+    /// One run's network, drawn in the order of its fields from the device's generator as
+    /// burn's modules draw it (the transformer by burn's `TransformerEncoderConfig`).
     fn new(config: &Config, spec: &AgentSpec, device: &Device) -> Belief {
         let width = config.belief_width;
+        let state_embedding = StackedLinear::new(spec.obs_dim, width, device);
+        let action_embedding = StackedLinear::new(spec.act_dim, width, device);
+        let token = StackedLinear::new(2 * width, width, device);
+        let position = EmbeddingConfig::new(spec.delay, width).init(device);
+        let position = Positions {
+            weight: Param::from_tensor(position.weight.val().unsqueeze_dim(0).detach()),
+        };
+        let input_norm = StackedLayerNorm::from_burn(&LayerNormConfig::new(width).init(device));
+        let encoder = Encoder::from_burn(
+            &TransformerEncoderConfig::new(width, width, config.belief_heads, config.belief_blocks)
+                .with_dropout(config.dropout)
+                .with_norm_first(true)
+                .init(device),
+        );
         Belief {
-            state_embedding: LinearConfig::new(spec.obs_dim, width).init(device),
-            action_embedding: LinearConfig::new(spec.act_dim, width).init(device),
-            token: LinearConfig::new(2 * width, width).init(device),
-            position: EmbeddingConfig::new(spec.delay, width).init(device),
-            input_norm: LayerNormConfig::new(width).init(device),
-            encoder: TransformerEncoderConfig::new(
-                width,
-                width,
-                config.belief_heads,
-                config.belief_blocks,
-            )
-            .with_dropout(config.dropout)
-            .with_norm_first(true)
-            .init(device),
-            output_norm: LayerNormConfig::new(width).init(device),
-            decoder: LinearConfig::new(width, spec.obs_dim).init(device),
+            state_embedding,
+            action_embedding,
+            token,
+            position,
+            input_norm,
+            encoder,
+            output_norm: StackedLayerNorm::from_burn(&LayerNormConfig::new(width).init(device)),
+            decoder: StackedLinear::new(width, spec.obs_dim, device),
         }
     }
 
-    /// The tokens' features `[B, Δ, width]` for augmented states `[B, obs + Δ·act]`; position
-    /// `i` attends to positions `0..=i` only. `dropout` while the belief trains, `None` off the
-    /// graph.
+    /// Each run's tokens' features `[S, B, Δ, width]` for its augmented states
+    /// `[S, B, obs + Δ·act]`; position `i` attends to positions `0..=i` only. Each run's
+    /// `dropout` masks while the belief trains, `None` off the graph.
     pub fn features(
         &self,
-        augmented: Tensor<2>,
+        augmented: Tensor<3>,
         spec: &AgentSpec,
-        mut dropout: Option<&mut DropoutMasks>,
-    ) -> Tensor<3> {
+        mut dropout: Option<&mut [DropoutMasks]>,
+    ) -> Tensor<4> {
         let (obs, act, delay) = (spec.obs_dim, spec.act_dim, spec.delay);
-        let rows = augmented.dims()[0];
-        let state = augmented.clone().slice([0..rows, 0..obs]);
+        let [runs, rows, _] = augmented.dims();
+        let state = augmented.clone().narrow(2, 0, obs);
         let actions = augmented
-            .slice([0..rows, obs..obs + delay * act])
-            .reshape([rows * delay, act]);
+            .narrow(2, obs, delay * act)
+            .reshape([runs, rows * delay, act]);
         // token([embed(s); embed(a_i)]) with the token layer's weight split in its two halves:
         // the state's half is the same for every position, so it is multiplied once per row.
         let weight = self.token.weight.val();
-        let width = weight.dims()[1];
+        let width = weight.dims()[2];
         let from_state = self
             .state_embedding
             .forward(state)
-            .matmul(weight.clone().slice([0..width, 0..width]));
+            .matmul(weight.clone().narrow(1, 0, width));
         let from_actions = self
             .action_embedding
             .forward(actions)
-            .matmul(weight.slice([width..2 * width, 0..width]))
-            .reshape([rows, delay, width]);
-        let mut tokens = from_actions
-            + from_state.unsqueeze_dim(1)
-            + self.position.weight.val().unsqueeze_dim(0);
-        if let Some(bias) = &self.token.bias {
-            tokens = tokens + bias.val().unsqueeze_dims(&[0, 1]);
-        }
-        let tokens = dropped(dropout.as_deref_mut(), self.input_norm.forward(tokens));
-        let causal = generate_autoregressive_mask(rows, delay, &tokens.device());
+            .matmul(weight.narrow(1, width, width))
+            .reshape([runs, rows, delay, width]);
+        let tokens = from_actions
+            + from_state.unsqueeze_dim(2)
+            + self.position.weight.val().unsqueeze_dim(1)
+            + self.token.bias.val().unsqueeze_dims(&[1, 2]);
+        let tokens = dropped(dropout.as_deref_mut(), self.input_norm.forward(tokens)).reshape([
+            runs,
+            rows * delay,
+            width,
+        ]);
+        let causal = generate_autoregressive_mask(runs * rows, delay, &tokens.device());
         self.output_norm
-            .forward(encode(&self.encoder, tokens, causal, dropout))
+            .forward(self.encoder.forward(tokens, delay, causal, dropout))
+            .reshape([runs, rows, delay, width])
     }
 
-    /// `ŝ_{t−Δ+1+i}` per position, `[B, Δ, obs]`.
-    pub fn reconstruct(&self, features: Tensor<3>) -> Tensor<3> {
-        self.decoder.forward(features)
+    /// `ŝ_{t−Δ+1+i}` per position, `[S, B, Δ, obs]`.
+    pub fn reconstruct(&self, features: Tensor<4>) -> Tensor<4> {
+        let [runs, rows, delay, width] = features.dims();
+        let predicted = self
+            .decoder
+            .forward(features.reshape([runs, rows * delay, width]));
+        let obs = predicted.dims()[2];
+        predicted.reshape([runs, rows, delay, obs])
     }
 
-    /// What [`Belief::features`] computes, as plain numbers (for export; the decoder does
-    /// not act).
-    fn weights(&self) -> BeliefTransformer {
+    /// The policy head's input at the last position, `[S, B, width]`.
+    fn last_features(&self, augmented: Tensor<3>, spec: &AgentSpec) -> Tensor<3> {
+        let features = self.features(augmented, spec, None);
+        let [runs, rows, delay, width] = features.dims();
+        features
+            .narrow(2, delay - 1, 1)
+            .reshape([runs, rows, width])
+    }
+
+    /// What [`Belief::features`] computes for run `slice`, as plain numbers (for export; the
+    /// decoder does not act).
+    fn weights(&self, slice: usize) -> BeliefTransformer {
         let blocks = self
             .encoder
             .layers
             .iter()
             .map(|layer| TransformerBlock {
-                attention_norm: norm(&layer.norm_2),
-                query: dense(&layer.mha.query),
-                key: dense(&layer.mha.key),
-                value: dense(&layer.mha.value),
-                attention_output: dense(&layer.mha.output),
-                feed_forward_norm: norm(&layer.norm_1),
-                feed_forward_inner: dense(&layer.pwff.linear_inner),
-                feed_forward_outer: dense(&layer.pwff.linear_outer),
+                attention_norm: layer.norm_2.norm(slice),
+                query: layer.mha.query.dense(slice),
+                key: layer.mha.key.dense(slice),
+                value: layer.mha.value.dense(slice),
+                attention_output: layer.mha.output.dense(slice),
+                feed_forward_norm: layer.norm_1.norm(slice),
+                feed_forward_inner: layer.pwff.linear_inner.dense(slice),
+                feed_forward_outer: layer.pwff.linear_outer.dense(slice),
             })
             .collect();
         let first = &self.encoder.layers[0].mha;
         BeliefTransformer {
-            state_embedding: dense(&self.state_embedding),
-            action_embedding: dense(&self.action_embedding),
-            token: dense(&self.token),
-            position: to_vec(self.position.weight.val()),
-            input_norm: norm(&self.input_norm),
+            state_embedding: self.state_embedding.dense(slice),
+            action_embedding: self.action_embedding.dense(slice),
+            token: self.token.dense(slice),
+            position: to_vec(self.position.weight.val().narrow(0, slice, 1)),
+            input_norm: self.input_norm.norm(slice),
             blocks,
-            output_norm: norm(&self.output_norm),
-            heads: first.n_heads,
+            output_norm: self.output_norm.norm(slice),
+            heads: first.heads,
             mask_fill: first.min_float as f32,
         }
     }
 }
 
-/// Dropout masks for one update, drawn from their own ChaCha8 stream in bulk: an entry is kept
-/// (and scaled by `1/(1 − p)`) with probability `1 − p`, as burn's `Dropout` does.
+/// burn's pre-LN `TransformerEncoder` (`norm_first`) for each run of a stack: one set of
+/// stacked weights, its forward pass written out (attention included) so that one batched
+/// product serves every run. Fields named as burn's.
+#[derive(Module, Debug)]
+pub struct Encoder {
+    pub layers: Vec<EncoderBlock>,
+}
+
+/// One pre-LN block: `x + drop(MHA(norm_2(x)))`, then `x + drop(FF(norm_1(x)))`.
+#[derive(Module, Debug)]
+pub struct EncoderBlock {
+    pub mha: Attention,
+    pub pwff: FeedForward,
+    pub norm_1: StackedLayerNorm,
+    pub norm_2: StackedLayerNorm,
+}
+
+/// Multi-head self-attention with stacked projections.
+#[derive(Module, Debug)]
+pub struct Attention {
+    pub query: StackedLinear,
+    pub key: StackedLinear,
+    pub value: StackedLinear,
+    pub output: StackedLinear,
+    pub heads: usize,
+    /// What masked scores are filled with before the softmax (burn's `min_float`).
+    pub min_float: f64,
+}
+
+/// `outer(drop(GELU(inner(·))))`.
+#[derive(Module, Debug)]
+pub struct FeedForward {
+    pub linear_inner: StackedLinear,
+    pub linear_outer: StackedLinear,
+}
+
+impl Encoder {
+    /// burn's encoder as a one-run stack, its weights as they are (drawn in the order of
+    /// burn's fields if they are not yet).
+    pub fn from_burn(encoder: &TransformerEncoder) -> Encoder {
+        Encoder {
+            layers: encoder
+                .layers
+                .iter()
+                .map(|layer| EncoderBlock {
+                    mha: Attention {
+                        query: StackedLinear::from_burn(&layer.mha.query),
+                        key: StackedLinear::from_burn(&layer.mha.key),
+                        value: StackedLinear::from_burn(&layer.mha.value),
+                        output: StackedLinear::from_burn(&layer.mha.output),
+                        heads: layer.mha.n_heads,
+                        min_float: layer.mha.min_float,
+                    },
+                    pwff: FeedForward {
+                        linear_inner: StackedLinear::from_burn(&layer.pwff.linear_inner),
+                        linear_outer: StackedLinear::from_burn(&layer.pwff.linear_outer),
+                    },
+                    norm_1: StackedLayerNorm::from_burn(&layer.norm_1),
+                    norm_2: StackedLayerNorm::from_burn(&layer.norm_2),
+                })
+                .collect(),
+        }
+    }
+
+    /// Each run's `x` `[S, B·T, width]` (B rows of T tokens) through the blocks, under
+    /// `causal` `[S·B, T, T]`; attention weights dropped after the softmax. Without `dropout`
+    /// it computes what burn's encoder computes in evaluation mode (tested).
+    pub fn forward(
+        &self,
+        tokens: Tensor<3>,
+        per_row: usize,
+        causal: Tensor<3, Bool>,
+        mut dropout: Option<&mut [DropoutMasks]>,
+    ) -> Tensor<3> {
+        let mut drop = |x: Tensor<3>| dropped(dropout.as_deref_mut(), x);
+        let mut x = tokens;
+        for layer in &self.layers {
+            let attended = layer.mha.forward(
+                layer.norm_2.forward(x.clone()),
+                per_row,
+                causal.clone(),
+                &mut drop,
+            );
+            x = x + drop(attended);
+            let ff = &layer.pwff;
+            let hidden = gelu(ff.linear_inner.forward(layer.norm_1.forward(x.clone())));
+            let out = ff.linear_outer.forward(drop(hidden));
+            x = x + drop(out);
+        }
+        x
+    }
+}
+
+impl Attention {
+    /// Scaled dot-product self-attention of each run's `x` `[S, B·T, width]` under the causal
+    /// mask `[S·B, T, T]`, its weights through `drop` after the softmax, as burn's
+    /// `MultiHeadAttention`.
+    fn forward(
+        &self,
+        x: Tensor<3>,
+        per_row: usize,
+        causal: Tensor<3, Bool>,
+        drop: &mut impl FnMut(Tensor<3>) -> Tensor<3>,
+    ) -> Tensor<3> {
+        let [runs, n, width] = x.dims();
+        let rows = runs * n / per_row;
+        let (heads, head_width) = (self.heads, width / self.heads);
+        let split = |linear: &StackedLinear| {
+            linear
+                .forward(x.clone())
+                .reshape([rows, per_row, heads, head_width])
+                .swap_dims(1, 2)
+        };
+        let (query, key, value) = (split(&self.query), split(&self.key), split(&self.value));
+        let scores = query
+            .matmul(key.transpose())
+            .div_scalar((head_width as f32).sqrt())
+            .mask_fill(causal.reshape([rows, 1, per_row, per_row]), self.min_float);
+        let weights = softmax(scores, 3).reshape([runs, rows / runs * heads * per_row, per_row]);
+        let weights = drop(weights).reshape([rows, heads, per_row, per_row]);
+        let context = weights
+            .matmul(value)
+            .swap_dims(1, 2)
+            .reshape([runs, n, width]);
+        self.output.forward(context)
+    }
+}
+
+/// Dropout masks for one update of one run, drawn from their own ChaCha8 stream in bulk: an
+/// entry is kept (and scaled by `1/(1 − p)`) with probability `1 − p`, as burn's `Dropout`
+/// does.
 pub struct DropoutMasks {
     rng: ChaCha8Rng,
     prob: f64,
@@ -304,112 +464,67 @@ impl DropoutMasks {
         }
     }
 
-    /// `x` with a fresh mask applied.
-    pub fn apply<const D: usize>(&mut self, x: Tensor<D>) -> Tensor<D> {
-        if self.prob == 0.0 {
+    /// `x` `[S, …]` with a fresh mask of each run's masks applied to its slice.
+    fn apply_stacked<const D: usize>(runs: &mut [DropoutMasks], x: Tensor<D>) -> Tensor<D> {
+        if runs[0].prob == 0.0 {
             return x;
         }
         let shape = x.shape();
-        let mut bits = vec![0u32; shape.num_elements()];
+        let per_run = shape.num_elements() / runs.len();
+        let mask: Vec<f32> = runs.iter_mut().flat_map(|run| run.mask(per_run)).collect();
+        let mask = Tensor::from_data(TensorData::new(mask, shape), &x.device());
+        x * mask
+    }
+
+    /// `n` entries of a mask.
+    fn mask(&mut self, n: usize) -> Vec<f32> {
+        let mut bits = vec![0u32; n];
         self.rng.fill(&mut bits[..]);
         let keep = 1.0 - self.prob;
         let threshold = (keep * 4_294_967_296.0) as u64;
         let scale = (1.0 / keep) as f32;
-        let mask: Vec<f32> = bits
-            .into_iter()
+        bits.into_iter()
             .map(|b| if u64::from(b) < threshold { scale } else { 0.0 })
-            .collect();
-        let mask = Tensor::from_data(TensorData::new(mask, shape), &x.device());
-        x * mask
+            .collect()
     }
 }
 
-/// `x` through `masks` when there are any (the belief in training), as it is otherwise.
-fn dropped<const D: usize>(masks: Option<&mut DropoutMasks>, x: Tensor<D>) -> Tensor<D> {
+/// `x` through each run's `masks` when there are any (the belief in training), as it is
+/// otherwise.
+fn dropped<const D: usize>(masks: Option<&mut [DropoutMasks]>, x: Tensor<D>) -> Tensor<D> {
     match masks {
-        Some(masks) => masks.apply(x),
+        Some(masks) => DropoutMasks::apply_stacked(masks, x),
         None => x,
     }
 }
 
-/// The forward pass of burn's pre-LN `TransformerEncoder` (`norm_first`), its weights as they
-/// are: per block `x + drop(MHA(norm_2(x)))`, then `x + drop(FF(norm_1(x)))` with
-/// `FF = outer(drop(GELU(inner(·))))`; attention weights dropped after the softmax. Without
-/// `dropout` it computes what burn's encoder computes in evaluation mode (tested).
-pub fn encode(
-    encoder: &TransformerEncoder,
-    tokens: Tensor<3>,
-    causal: Tensor<3, Bool>,
-    mut dropout: Option<&mut DropoutMasks>,
-) -> Tensor<3> {
-    let mut drop = |x: Tensor<3>| dropped(dropout.as_deref_mut(), x);
-    let mut x = tokens;
-    for layer in &encoder.layers {
-        let attended = attention(
-            &layer.mha,
-            layer.norm_2.forward(x.clone()),
-            causal.clone(),
-            &mut drop,
-        );
-        x = x + drop(attended);
-        let ff = &layer.pwff;
-        let hidden = ff
-            .activation
-            .forward(ff.linear_inner.forward(layer.norm_1.forward(x.clone())));
-        let out = ff.linear_outer.forward(drop(hidden));
-        x = x + drop(out);
-    }
-    x
+/// The belief's reconstruction loss per run `[S]`: the squared error of every predicted
+/// intermediate state, averaged over positions and state dimensions,
+/// `E_i[‖ŝ_{t−Δ+1+i} − s_{t−Δ+1+i}‖²] / dim(S)`.
+pub fn reconstruction_loss(predicted: Tensor<4>, truth: Tensor<4>) -> Tensor<1> {
+    let [runs, rows, delay, obs] = predicted.dims();
+    (predicted - truth)
+        .square()
+        .reshape([runs, rows * delay * obs])
+        .mean_dim(1)
+        .reshape([runs])
 }
 
-/// Scaled dot-product self-attention of `x` `[B, T, width]` under the causal mask, its
-/// weights through `drop` after the softmax, as burn's `MultiHeadAttention`.
-fn attention(
-    mha: &MultiHeadAttention,
-    x: Tensor<3>,
-    causal: Tensor<3, Bool>,
-    drop: &mut impl FnMut(Tensor<3>) -> Tensor<3>,
-) -> Tensor<3> {
-    let [rows, tokens, width] = x.dims();
-    let (heads, head_width) = (mha.n_heads, mha.d_k);
-    let split = |linear: &Linear| {
-        linear
-            .forward(x.clone())
-            .reshape([rows, tokens, heads, head_width])
-            .swap_dims(1, 2)
-    };
-    let (query, key, value) = (split(&mha.query), split(&mha.key), split(&mha.value));
-    let scores = query
-        .matmul(key.transpose())
-        .div_scalar((head_width as f32).sqrt())
-        .mask_fill(causal.reshape([rows, 1, tokens, tokens]), mha.min_float);
-    let weights = softmax(scores, 3).reshape([rows * heads, tokens, tokens]);
-    let weights = drop(weights).reshape([rows, heads, tokens, tokens]);
-    let context = weights
-        .matmul(value)
-        .swap_dims(1, 2)
-        .reshape([rows, tokens, width]);
-    mha.output.forward(context)
-}
-
-/// The belief's reconstruction loss: the squared error of every predicted intermediate state,
-/// averaged over positions and state dimensions, `E_i[‖ŝ_{t−Δ+1+i} − s_{t−Δ+1+i}‖²] / dim(S)`.
-pub fn reconstruction_loss(predicted: Tensor<3>, truth: Tensor<3>) -> Tensor<1> {
-    (predicted - truth).square().mean()
-}
-
-/// `KL(N(μ_Δ, σ_Δ) ‖ N(μ_ref, σ_ref))` per action dimension, averaged over dimensions and rows
-/// (the cloning loss on the Gaussians before the squash):
+/// `KL(N(μ_Δ, σ_Δ) ‖ N(μ_ref, σ_ref))` per action dimension, averaged over dimensions and each
+/// run's rows, `[S]` (the cloning loss on the Gaussians before the squash):
 /// `log σ_ref − log σ_Δ + (σ_Δ² + (μ_Δ − μ_ref)²) / (2σ_ref²) − 1/2`.
 pub fn gaussian_kl(
-    (mean, log_std): (Tensor<2>, Tensor<2>),
-    (ref_mean, ref_log_std): (Tensor<2>, Tensor<2>),
+    (mean, log_std): (Tensor<3>, Tensor<3>),
+    (ref_mean, ref_log_std): (Tensor<3>, Tensor<3>),
 ) -> Tensor<1> {
+    let [runs, rows, act] = mean.dims();
     let variance = log_std.clone().mul_scalar(2.0).exp();
     let ref_variance = ref_log_std.clone().mul_scalar(2.0).exp();
     (ref_log_std - log_std + (variance + (mean - ref_mean).square()) / ref_variance.mul_scalar(2.0))
         .sub_scalar(0.5)
-        .mean()
+        .reshape([runs, rows * act])
+        .mean_dim(1)
+        .reshape([runs])
 }
 
 /// `train.csv` columns.
@@ -418,7 +533,7 @@ const RECONSTRUCTION_STAT: &str = "reconstruction_loss";
 /// Logged on the updates that end in a cloning stage: its mean KL and its length.
 const BC_STATS: [&str; 2] = ["bc_kl", "bc_updates"];
 
-/// What VDPO carries between updates besides its networks.
+/// What a VDPO run carries between updates besides its networks.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 struct Schedule {
     /// Environment steps at the previous update (none before the first): a cloning stage runs
@@ -428,9 +543,11 @@ struct Schedule {
     noise: Noise,
 }
 
+/// VDPO for a stack of runs (a solo run is S = 1): every network stacked, a schedule, noise
+/// and dropout stream per run.
 pub struct Vdpo {
     spec: AgentSpec,
-    seed: u64,
+    seeds: Vec<u64>,
     actor_every: u64,
     bc_every: u64,
     bc_updates: u64,
@@ -446,26 +563,30 @@ pub struct Vdpo {
     policy_head_opt: ModuleOptimizer,
     scale: ActionScale,
     devices: Devices,
-    schedule: Schedule,
+    schedules: Vec<Schedule>,
 }
 
 impl Vdpo {
-    pub fn new(config: &Config, spec: &AgentSpec, devices: &Devices, seed: u64) -> Vdpo {
-        let mut reference =
-            SacLearner::new(spec.obs_dim, spec.obs_dim, spec, &config.sac, devices, seed);
+    /// The runs of `seeds`.
+    pub fn new(config: &Config, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Vdpo {
+        let mut reference = SacLearner::on_state(spec, &config.sac, devices, seeds);
         reference.rates = LearningRates {
             critic: config.critic_learning_rate,
             actor: config.sac.learning_rate,
             temperature: config.temperature_learning_rate,
         };
-        devices.train.seed(seeds::named(seed, "vdpo/belief"));
-        let belief = Belief::new(config, spec, &devices.train);
-        materialize(&belief);
-        let policy_head = GaussianPolicy::new(config.belief_width, spec.act_dim, &devices.train);
-        materialize(&policy_head);
+        let (beliefs, heads): (Vec<_>, Vec<_>) = seeds
+            .iter()
+            .map(|&seed| {
+                devices.train.seed(seeds::named(seed, "vdpo/belief"));
+                let belief = Belief::new(config, spec, &devices.train);
+                let head = GaussianPolicy::new(config.belief_width, spec.act_dim, &devices.train);
+                (belief, head)
+            })
+            .unzip();
         Vdpo {
             spec: spec.clone(),
-            seed,
+            seeds: seeds.to_vec(),
             actor_every: config.actor_every,
             bc_every: config.bc_every,
             bc_updates: config.bc_updates,
@@ -473,132 +594,165 @@ impl Vdpo {
             bc_learning_rate: config.bc_learning_rate,
             dropout: config.dropout,
             reference,
-            belief,
+            belief: stack(beliefs),
             belief_opt: adam(config.sac.adam_epsilon),
-            policy_head,
+            policy_head: stack(heads),
             policy_head_opt: adam(config.sac.adam_epsilon),
             scale: ActionScale::new(&spec.action_low, &spec.action_high, &devices.plain),
             devices: devices.clone(),
-            schedule: Schedule {
-                last_env_steps: None,
-                noise: Noise::new(seeds::named(seed, "vdpo/exploration")),
-            },
+            schedules: seeds
+                .iter()
+                .map(|&seed| Schedule {
+                    last_env_steps: None,
+                    noise: Noise::new(seeds::named(seed, "vdpo/exploration")),
+                })
+                .collect(),
         }
     }
 
-    /// The policy head's input at the last position, `[B, width]`, off the graph.
-    fn last_features(&self, augmented: Tensor<2>) -> Tensor<2> {
-        let rows = augmented.dims()[0];
-        let features = self.belief.valid().features(augmented, &self.spec, None);
-        let [_, delay, width] = features.dims();
-        features
-            .slice([0..rows, delay - 1..delay, 0..width])
-            .reshape([rows, width])
-    }
-
-    /// One update of the reference SAC on the true `(s, a, r, s')`; returns its statistics.
-    fn update_reference(&mut self, batch: &SacBatch, updates_before: u64) -> Stats {
-        let alpha = self.reference.temperature.alphas()[0];
-        let critic_loss = self.reference.update_critics(batch)[0];
-        let mut stats: Stats = vec![
-            (REFERENCE_STATS[0], critic_loss),
-            (REFERENCE_STATS[2], alpha),
-        ];
-        if (updates_before + 1) % self.actor_every == 0 {
-            let mut actor_loss = 0.0;
+    /// One update of the reference SAC on the true `(s, a, r, s')`; returns each run's
+    /// statistics.
+    fn update_reference(&mut self, batch: &SacBatch, updates_before: u64) -> Vec<Stats> {
+        let alphas = self.reference.temperature.alphas();
+        let critic_losses = self.reference.update_critics(batch);
+        let actor_losses = ((updates_before + 1) % self.actor_every == 0).then(|| {
+            let mut sums = vec![0.0; self.seeds.len()];
             for _ in 0..self.actor_every {
                 let distribution = self.reference.distribution(batch);
-                actor_loss += self
-                    .reference
-                    .update_actor_and_temperature(batch, distribution, None)
-                    .0[0];
+                let (losses, _) =
+                    self.reference
+                        .update_actor_and_temperature(batch, distribution, None);
+                sums.iter_mut()
+                    .zip(losses)
+                    .for_each(|(sum, loss)| *sum += loss);
             }
-            stats.push((REFERENCE_STATS[1], actor_loss / self.actor_every as f64));
-        }
+            sums
+        });
         self.reference.update_targets();
-        stats
+        (0..self.seeds.len())
+            .map(|run| {
+                let mut stats: Stats = vec![
+                    (REFERENCE_STATS[0], critic_losses[run]),
+                    (REFERENCE_STATS[2], alphas[run]),
+                ];
+                if let Some(sums) = &actor_losses {
+                    stats.push((REFERENCE_STATS[1], sums[run] / self.actor_every as f64));
+                }
+                stats
+            })
+            .collect()
     }
 
-    /// One step of the belief network on the reconstruction loss; returns the loss. Dropout
-    /// masks draw from a stream seeded per update, so that a resumed run draws the same.
+    /// One step of the belief network on the runs' reconstruction losses (summed); returns
+    /// each run's loss. Dropout masks draw from a stream seeded per run and update, so that a
+    /// resumed run draws the same.
     fn update_belief(
         &mut self,
-        augmented: Tensor<2>,
-        truth: Tensor<3>,
+        augmented: Tensor<3>,
+        truth: Tensor<4>,
         updates_before: u64,
-    ) -> f64 {
-        let mut masks = DropoutMasks::new(
-            seeds::named(self.seed.wrapping_add(updates_before), "vdpo/dropout"),
-            self.dropout,
-        );
+    ) -> Vec<f64> {
+        let mut masks: Vec<DropoutMasks> = self
+            .seeds
+            .iter()
+            .map(|seed| {
+                let stream = seeds::named(seed.wrapping_add(updates_before), "vdpo/dropout");
+                DropoutMasks::new(stream, self.dropout)
+            })
+            .collect();
         let features = self
             .belief
             .features(augmented, &self.spec, Some(&mut masks));
-        let loss = reconstruction_loss(self.belief.reconstruct(features), truth);
-        let value = f64::from(loss.clone().inner().into_scalar::<f32>());
-        let grads = GradientsParams::from_grads(loss.backward(), &self.belief);
+        let losses = reconstruction_loss(self.belief.reconstruct(features), truth);
+        let values = per_run(losses.clone());
+        let grads = GradientsParams::from_grads(losses.sum().backward(), &self.belief);
         self.belief = self
             .belief_opt
             .step(self.belief_learning_rate, self.belief.clone(), grads);
-        value
+        values
     }
 
-    /// The cloning stage: `bc_updates` steps of the policy head on fresh batches, the
-    /// transformer held fixed; returns the mean KL and the steps taken.
-    fn clone_reference(&mut self, ctx: &mut UpdateContext<'_>) -> Result<(f64, u64), ReplayError> {
-        let (obs, delay) = (self.spec.obs_dim, self.spec.delay);
+    /// The cloning stage: `bc_updates` steps of the policy heads, each run on fresh batches of
+    /// its own, the transformer held fixed; returns each run's mean KL, and the steps taken.
+    fn clone_reference(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<(Vec<f64>, u64), ReplayError> {
+        let (runs, obs, delay) = (self.seeds.len(), self.spec.obs_dim, self.spec.delay);
         let plain = self.devices.plain.clone();
         let (belief, reference) = (self.belief.valid(), self.reference.actor.valid());
-        let (mut kl_sum, mut steps) = (0.0, 0u64);
+        let (mut kl_sums, mut steps) = (vec![0.0; runs], 0u64);
         while steps < self.bc_updates {
-            let batch = ctx.batch()?;
-            let n = batch.len();
-            let features = belief.features(rows(batch.augmented, n, &plain), &self.spec, None);
-            let width = features.dims()[2];
-            let features = features.reshape([n * delay, width]);
-            let targets = matrix(batch.intermediate_states, n * delay, obs, &plain);
-            let loss = gaussian_kl(
-                one_run(self.policy_head.distribution(features.unsqueeze_dim(0))),
-                one_run(reference.distribution(targets.unsqueeze_dim(0))),
+            let batches = UpdateContext::batches(contexts)?;
+            let n = batches[0].len();
+            let augmented = stacked_rows(
+                batches.iter().map(|b| b.augmented.as_slice()),
+                &batches,
+                &plain,
             );
-            kl_sum += f64::from(loss.clone().inner().into_scalar::<f32>());
-            let grads = GradientsParams::from_grads(loss.backward(), &self.policy_head);
+            let features = belief.features(augmented, &self.spec, None);
+            let width = features.dims()[3];
+            let features = features.reshape([runs, n * delay, width]);
+            let targets = stacked_rows(
+                batches.iter().map(|b| b.intermediate_states.as_slice()),
+                &batches,
+                &plain,
+            )
+            .reshape([runs, n * delay, obs]);
+            let losses = gaussian_kl(
+                self.policy_head.distribution(features),
+                reference.distribution(targets),
+            );
+            kl_sums
+                .iter_mut()
+                .zip(per_run(losses.clone()))
+                .for_each(|(sum, kl)| *sum += kl);
+            let grads = GradientsParams::from_grads(losses.sum().backward(), &self.policy_head);
             self.policy_head =
                 self.policy_head_opt
                     .step(self.bc_learning_rate, self.policy_head.clone(), grads);
             steps += 1;
         }
-        Ok((kl_sum / steps as f64, steps))
+        Ok((
+            kl_sums.iter().map(|sum| sum / steps as f64).collect(),
+            steps,
+        ))
     }
 }
 
 impl Agent for Vdpo {
-    fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+    fn runs(&self) -> usize {
+        self.seeds.len()
+    }
+
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         let width = self.spec.augmented_dim();
-        let x = matrix(
-            augmented[..rows * width].to_vec(),
-            rows,
-            width,
-            &self.devices.plain,
+        let plain = self.devices.plain.clone();
+        let x = Tensor::from_data(
+            TensorData::new(augmented[..rows * width].to_vec(), [1, rows, width]),
+            &plain,
         );
-        let h = self.last_features(x);
-        let head = self.policy_head.valid();
+        let (belief, head) = match self.runs() {
+            1 => (self.belief.valid(), self.policy_head.valid()),
+            _ => (
+                slice(&self.belief.valid(), run),
+                slice(&self.policy_head.valid(), run),
+            ),
+        };
+        let h = belief.last_features(x, &self.spec);
         to_vec(match mode {
             ActMode::Explore => {
-                let eps = self
-                    .schedule
-                    .noise
-                    .normal(rows, self.spec.act_dim, &self.devices.plain);
-                head.sample(h.unsqueeze_dim(0), eps.unsqueeze_dim(0), &self.scale)
-                    .action
+                let noise = std::slice::from_mut(&mut self.schedules[run].noise);
+                let eps = Noise::stacked_normal(noise, rows, self.spec.act_dim, &plain);
+                head.sample(h, eps, &self.scale).action
             }
-            ActMode::Deterministic => head.mode(h.unsqueeze_dim(0), &self.scale),
+            ActMode::Deterministic => head.mode(h, &self.scale),
         })
     }
 
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::Belief {
-            belief: self.belief.weights(),
+            belief: self.belief.weights(0),
             policy: self.policy_head.weights(0),
         }
     }
@@ -625,62 +779,75 @@ impl Agent for Vdpo {
         }
     }
 
-    fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        let batch = ctx.batch()?;
+    fn update_runs(
+        &mut self,
+        contexts: &mut [UpdateContext<'_>],
+    ) -> Result<Vec<Stats>, ReplayError> {
+        // The runs of a stack step together: their counters are the same.
+        let (updates, env_steps) = (contexts[0].updates, contexts[0].env_steps);
+        let batches = UpdateContext::batches(contexts)?;
         let plain = self.devices.plain.clone();
-        let (n, obs, delay) = (batch.len(), self.spec.obs_dim, self.spec.delay);
-        let tensors = TransitionTensors::new(&batch, &plain);
-        let on_state = (tensors.state.clone(), tensors.next_state.clone());
+        let (runs, n) = (batches.len(), batches[0].len());
+        let t = TransitionTensors::stacked(&batches, &plain);
+        let on_state = (t.state.clone(), t.next_state.clone());
 
         // 1. The reference SAC on the true, time-aligned (s, a, r, s').
-        let mut stats = self.update_reference(
-            &SacBatch::new(&tensors, on_state.clone(), on_state),
-            ctx.updates,
-        );
+        let mut stats =
+            self.update_reference(&SacBatch::new(&t, on_state.clone(), on_state), updates);
 
         // 2. The belief: reconstruct s_{τ−Δ+1..τ} from x_τ.
-        let truth: Tensor<3> =
-            matrix(batch.intermediate_states, n * delay, obs, &plain).reshape([n, delay, obs]);
-        stats.push((
-            RECONSTRUCTION_STAT,
-            self.update_belief(tensors.augmented.squeeze_dim(0), truth, ctx.updates),
-        ));
+        let truth = stacked_rows(
+            batches.iter().map(|b| b.intermediate_states.as_slice()),
+            &batches,
+            &plain,
+        )
+        .reshape([runs, n, self.spec.delay, self.spec.obs_dim]);
+        let losses = self.update_belief(t.augmented, truth, updates);
+        for (stats, loss) in stats.iter_mut().zip(losses) {
+            stats.push((RECONSTRUCTION_STAT, loss));
+        }
 
         // 3. The cloning stage, on its schedule.
-        let due = self
-            .schedule
+        let due = self.schedules[0]
             .last_env_steps
-            .is_some_and(|last| ctx.env_steps / self.bc_every > last / self.bc_every);
-        self.schedule.last_env_steps = Some(ctx.env_steps);
+            .is_some_and(|last| env_steps / self.bc_every > last / self.bc_every);
+        for schedule in &mut self.schedules {
+            schedule.last_env_steps = Some(env_steps);
+        }
         if due {
-            let (kl, steps) = self.clone_reference(ctx)?;
-            stats.extend([(BC_STATS[0], kl), (BC_STATS[1], steps as f64)]);
+            let (kls, steps) = self.clone_reference(contexts)?;
+            for (stats, kl) in stats.iter_mut().zip(kls) {
+                stats.extend([(BC_STATS[0], kl), (BC_STATS[1], steps as f64)]);
+            }
         }
         Ok(stats)
     }
 
-    fn save(&self, dir: &Path) -> Result<(), LearnError> {
-        self.reference.save(&[dir], "reference_")?;
-        let files = CheckpointDir::new(dir);
-        files.save_module("belief.bpk", &self.belief)?;
-        files.save_slice("policy_head.bpk", &self.policy_head, 0)?;
-        files.save_optimizer("belief_adam.bpk", &self.belief_opt)?;
-        files.save_optimizer_slice("policy_head_adam.bpk", &self.policy_head_opt, 0)?;
-        files.save_json("vdpo.json", &self.schedule)
+    fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.reference.save(dirs, "reference_")?;
+        for (run, dir) in dirs.iter().enumerate() {
+            let files = CheckpointDir::new(dir);
+            files.save_slice("belief.bpk", &self.belief, run)?;
+            files.save_slice("policy_head.bpk", &self.policy_head, run)?;
+            files.save_optimizer_slice("belief_adam.bpk", &self.belief_opt, run)?;
+            files.save_optimizer_slice("policy_head_adam.bpk", &self.policy_head_opt, run)?;
+            files.save_json("vdpo.json", &self.schedules[run])?;
+        }
+        Ok(())
     }
 
-    fn load(&mut self, dir: &Path) -> Result<(), LearnError> {
-        self.reference.load(&[dir], "reference_")?;
-        let files = CheckpointDir::new(dir);
-        self.belief = files.load_module("belief.bpk", self.belief.clone())?;
-        self.policy_head = load_stack(&[files], "policy_head.bpk", self.policy_head.clone())?;
-        self.belief_opt = files.load_optimizer("belief_adam.bpk", self.belief_opt.clone())?;
-        self.policy_head_opt = load_optimizer_stack(
-            &[files],
-            "policy_head_adam.bpk",
-            self.policy_head_opt.clone(),
-        )?;
-        self.schedule = files.load_json("vdpo.json")?;
+    fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
+        self.reference.load(dirs, "reference_")?;
+        let files: Vec<CheckpointDir> = dirs.iter().map(|dir| CheckpointDir::new(dir)).collect();
+        self.belief = load_stack(&files, "belief.bpk", self.belief.clone())?;
+        self.policy_head = load_stack(&files, "policy_head.bpk", self.policy_head.clone())?;
+        self.belief_opt = load_optimizer_stack(&files, "belief_adam.bpk", self.belief_opt.clone())?;
+        self.policy_head_opt =
+            load_optimizer_stack(&files, "policy_head_adam.bpk", self.policy_head_opt.clone())?;
+        self.schedules = files
+            .iter()
+            .map(|files| files.load_json("vdpo.json"))
+            .collect::<Result<_, _>>()?;
         Ok(())
     }
 }
@@ -689,8 +856,13 @@ impl Agent for Vdpo {
 mod tests {
     use super::*;
     use crate::algos::random_batch;
-    use crate::learn::{LearnDevice, assert_close as close};
+    use crate::learn::{LearnDevice, assert_close as close, matrix};
     use burn::nn::transformer::TransformerEncoderInput;
+
+    /// One run's `[1, rows, cols]`.
+    fn run_rows(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Tensor<3> {
+        matrix(values, rows, cols, device).unsqueeze_dim(0)
+    }
 
     #[test]
     fn gaussian_kl_matches_hand_values() {
@@ -699,12 +871,12 @@ mod tests {
         // Gaussians, 0. The loss averages the two.
         let kl = gaussian_kl(
             (
-                matrix(vec![0.0, 0.3], 1, 2, &device),
-                matrix(vec![0.0, -1.0], 1, 2, &device),
+                run_rows(vec![0.0, 0.3], 1, 2, &device),
+                run_rows(vec![0.0, -1.0], 1, 2, &device),
             ),
             (
-                matrix(vec![1.0, 0.3], 1, 2, &device),
-                matrix(vec![2.0f32.ln(), -1.0], 1, 2, &device),
+                run_rows(vec![1.0, 0.3], 1, 2, &device),
+                run_rows(vec![2.0f32.ln(), -1.0], 1, 2, &device),
             ),
         );
         close(&to_vec(kl), &[(2.0f32.ln() + 0.25 - 0.5) / 2.0]);
@@ -727,7 +899,7 @@ mod tests {
             bc_updates,
             ..Config::default()
         };
-        (Vdpo::new(&config, &spec, &devices, 4), spec)
+        (Vdpo::new(&config, &spec, &devices, &[4]), spec)
     }
 
     /// Two augmented states that differ only in their last action `a_{t−1}`.
@@ -750,7 +922,7 @@ mod tests {
         let (agent, spec) = small_agent(1);
         let (x, changed) = differing_in_the_last_action(&spec);
         let features = |x: Vec<f32>| {
-            let input = matrix(x, 2, spec.augmented_dim(), &agent.devices.plain);
+            let input = run_rows(x, 2, spec.augmented_dim(), &agent.devices.plain);
             to_vec(agent.belief.valid().features(input, &spec, None))
         };
         let (a, b) = (features(x), features(changed));
@@ -802,36 +974,30 @@ mod tests {
         let features = agent
             .belief
             .valid()
-            .features(rows(batch.augmented.clone(), n, &plain), &spec, None)
-            .reshape([n * spec.delay, 8]);
-        let targets = matrix(
+            .features(
+                run_rows(batch.augmented.clone(), n, spec.augmented_dim(), &plain),
+                &spec,
+                None,
+            )
+            .reshape([1, n * spec.delay, 8]);
+        let targets = run_rows(
             batch.intermediate_states.clone(),
             n * spec.delay,
             spec.obs_dim,
             &plain,
         );
         let (head, reference) = (
-            one_run(
-                agent
-                    .policy_head
-                    .valid()
-                    .distribution(features.unsqueeze_dim(0)),
-            ),
-            one_run(
-                agent
-                    .reference
-                    .actor
-                    .valid()
-                    .distribution(targets.unsqueeze_dim(0)),
-            ),
+            agent.policy_head.valid().distribution(features),
+            agent.reference.actor.valid().distribution(targets),
         );
         let forward = f64::from(to_vec(gaussian_kl(head.clone(), reference.clone()))[0]);
         let backward = f64::from(to_vec(gaussian_kl(reference, head))[0]);
         let gap = (forward - backward).abs();
         assert!(gap > 1e-4 * forward.abs(), "{forward} {backward}");
-        let (kl, steps) = agent
-            .clone_reference(&mut UpdateContext::fixed(&batch, 0, 0))
+        let (kls, steps) = agent
+            .clone_reference(&mut [UpdateContext::fixed(&batch, 0, 0)])
             .unwrap();
+        let kl = kls[0];
         assert_eq!(steps, 1);
         assert!(
             (kl - forward).abs() < gap / 100.0,
@@ -839,23 +1005,58 @@ mod tests {
         );
     }
 
-    /// The written-out forward pass is burn's encoder in evaluation mode, weights as they are.
+    /// The written-out, stacked forward pass (attention included) is burn's
+    /// `TransformerEncoder` in evaluation mode with the same weights: one encoder as a stack of
+    /// one (S = 1), and each run of a stack of three encoders fed its own tokens.
     #[test]
-    fn encode_without_dropout_is_burns_encoder_in_evaluation() {
+    fn the_stacked_encoder_is_burns_encoder_in_evaluation_run_by_run() {
         let device = Devices::new(LearnDevice::Cpu).unwrap().plain;
-        device.seed(5);
-        let encoder = TransformerEncoderConfig::new(8, 8, 2, 2)
-            .with_dropout(0.1)
-            .with_norm_first(true)
-            .init(&device);
-        let tokens = Tensor::<3>::random([3, 4, 8], burn::tensor::Distribution::Default, &device);
-        let causal = generate_autoregressive_mask(3, 4, &device);
-        let burns =
-            encoder.forward(TransformerEncoderInput::new(tokens.clone()).mask_attn(causal.clone()));
+        let (rows, tokens, width) = (3, 4, 8);
+        let encoders: Vec<TransformerEncoder> = (0..3)
+            .map(|seed| {
+                device.seed(5 + seed);
+                TransformerEncoderConfig::new(width, width, 2, 2)
+                    .with_dropout(0.1)
+                    .with_norm_first(true)
+                    .init(&device)
+            })
+            .collect();
+        let inputs: Vec<Tensor<3>> = (0..3)
+            .map(|_| {
+                Tensor::random(
+                    [rows, tokens, width],
+                    burn::tensor::Distribution::Default,
+                    &device,
+                )
+            })
+            .collect();
+        let burns = |run: usize| {
+            let causal = generate_autoregressive_mask(rows, tokens, &device);
+            to_vec(
+                encoders[run]
+                    .forward(TransformerEncoderInput::new(inputs[run].clone()).mask_attn(causal)),
+            )
+        };
+        let ours = |encoder: &Encoder, x: Tensor<3>| {
+            let runs = x.dims()[0] / rows;
+            let causal = generate_autoregressive_mask(runs * rows, tokens, &device);
+            to_vec(encoder.forward(
+                x.reshape([runs, rows * tokens, width]),
+                tokens,
+                causal,
+                None,
+            ))
+        };
         close(
-            &to_vec(encode(&encoder, tokens, causal, None)),
-            &to_vec(burns),
+            &ours(&Encoder::from_burn(&encoders[0]), inputs[0].clone()),
+            &burns(0),
         );
+        let stacked = stack(encoders.iter().map(Encoder::from_burn).collect());
+        let all = ours(&stacked, Tensor::cat(inputs.clone(), 0));
+        let per_run = rows * tokens * width;
+        for run in 0..3 {
+            close(&all[run * per_run..(run + 1) * per_run], &burns(run));
+        }
     }
 
     /// A mask keeps about 1 − p of the entries, scaled by 1/(1 − p), and repeats for a seed.
@@ -863,7 +1064,10 @@ mod tests {
     fn dropout_masks_keep_one_minus_p_scaled_and_repeat_per_seed() {
         let device = Devices::new(LearnDevice::Cpu).unwrap().plain;
         let ones = Tensor::<2>::ones([100, 100], &device);
-        let mask = |seed| to_vec(DropoutMasks::new(seed, 0.1).apply(ones.clone()));
+        let mask = |seed| {
+            let mut masks = [DropoutMasks::new(seed, 0.1)];
+            to_vec(DropoutMasks::apply_stacked(&mut masks, ones.clone()))
+        };
         let first = mask(9);
         assert_eq!(first, mask(9));
         assert_ne!(first, mask(10));
@@ -882,8 +1086,8 @@ mod tests {
         let device = Devices::new(LearnDevice::Cpu).unwrap().plain;
         // Two positions of a 1-dimensional state: errors 1 and 3, so (1 + 9) / 2; every
         // position of a replayed x_t is a real state, so none is masked.
-        let predicted: Tensor<3> = matrix(vec![0.0, 0.0], 2, 1, &device).reshape([1, 2, 1]);
-        let truth: Tensor<3> = matrix(vec![1.0, 3.0], 2, 1, &device).reshape([1, 2, 1]);
+        let predicted: Tensor<4> = matrix(vec![0.0, 0.0], 2, 1, &device).reshape([1, 1, 2, 1]);
+        let truth: Tensor<4> = matrix(vec![1.0, 3.0], 2, 1, &device).reshape([1, 1, 2, 1]);
         close(&to_vec(reconstruction_loss(predicted, truth)), &[5.0]);
     }
 
@@ -923,7 +1127,7 @@ mod tests {
         for (first, stride, expected) in
             [(5u64, 1u64, vec![10u64, 20, 30]), (4, 4, vec![12, 20, 32])]
         {
-            let mut agent = Vdpo::new(&config, &spec, &devices, 3);
+            let mut agent = Vdpo::new(&config, &spec, &devices, &[3]);
             let mut bursts = Vec::new();
             for (updates, env_steps) in (first..=33).step_by(stride as usize).enumerate() {
                 let before = head(&agent);

@@ -21,11 +21,10 @@ pub use losses::{
 };
 pub use nets::{
     ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, Mlp, MlpConfig, PolicySample,
-    QNetwork, Temperature, TwinQ, adam, dense, materialize, norm, one_run, squashed_sample,
-    squashed_samples_k,
+    QNetwork, Temperature, TwinQ, adam, squashed_sample, squashed_samples_k,
 };
 pub use noise::Noise;
-pub use stack::{StackedLinear, slice, slice_pack, stack, stack_packs};
+pub use stack::{StackedLayerNorm, StackedLinear, slice, slice_pack, stack, stack_packs};
 #[cfg(test)]
 pub(crate) use tensors::assert_close;
 pub use tensors::{TransitionTensors, matrix, rows, stacked_rows, to_vec};

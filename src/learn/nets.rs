@@ -1,7 +1,6 @@
 //! Networks: 256-256 ReLU MLPs, a tanh-squashed Gaussian policy, twin Q-networks and the
 //! learned temperature.
-use burn::module::{ModuleVisitor, Param};
-use burn::nn::Linear;
+use burn::module::Param;
 use burn::optim::{AdamConfig, ModuleOptimizer};
 use burn::prelude::*;
 use burn::tensor::activation::{relu, sigmoid};
@@ -9,7 +8,7 @@ use burn::tensor::activation::{relu, sigmoid};
 use super::losses::squashed_gaussian_log_prob;
 use super::stack::StackedLinear;
 use super::tensors::{matrix, to_vec};
-use crate::acting::{Dense, GaussianPolicyWeights, Norm};
+use crate::acting::{Dense, GaussianPolicyWeights};
 
 /// Hidden width of every network (docs/DESIGN.md §3.3).
 pub const HIDDEN: usize = 256;
@@ -173,32 +172,6 @@ impl GaussianPolicy {
     }
 }
 
-/// A linear layer's weights as plain numbers, `[input, output]` (burn's layout).
-pub fn dense(layer: &Linear) -> Dense {
-    let [input, output] = layer.weight.val().dims();
-    Dense {
-        input,
-        output,
-        weight: to_vec(layer.weight.val()),
-        bias: layer
-            .bias
-            .as_ref()
-            .map_or_else(|| vec![0.0; output], |bias| to_vec(bias.val())),
-    }
-}
-
-/// A layer normalisation's scale and shift as plain numbers.
-pub fn norm(layer: &burn::nn::LayerNorm) -> Norm {
-    let scale = to_vec(layer.gamma.val());
-    Norm {
-        shift: layer
-            .beta
-            .as_ref()
-            .map_or_else(|| vec![0.0; scale.len()], |beta| to_vec(beta.val())),
-        scale,
-    }
-}
-
 /// [`GaussianPolicy::sample`] from a distribution already computed (so that two losses on
 /// the same states share one trunk pass).
 pub fn squashed_sample(
@@ -231,11 +204,6 @@ pub fn squashed_samples_k(
     // (libm's scalar tanhf, called again by its backward) costs about three logistics.
     let squashed = sigmoid(u.mul_scalar(2.0)).mul_scalar(2.0).sub_scalar(1.0);
     squashed * scale.scale.clone().unsqueeze() + scale.bias.clone().unsqueeze()
-}
-
-/// A one-run stack's distribution `([1, B, A], [1, B, A])` as that run's `([B, A], [B, A])`.
-pub fn one_run((mean, log_std): (Tensor<3>, Tensor<3>)) -> (Tensor<2>, Tensor<2>) {
-    (mean.squeeze_dim(0), log_std.squeeze_dim(0))
 }
 
 /// The entropy temperature `α = exp(log α)`, one per run of a stack: `log α` is `[S, 1]`.
@@ -321,18 +289,6 @@ impl Mlp {
             if i < last { relu(y) } else { y }
         })
     }
-}
-
-/// Forces burn's lazily initialised parameters to draw their values now, in declaration
-/// order, so that a seed fixes them.
-pub fn materialize<M: Module>(module: &M) {
-    struct Touch;
-    impl ModuleVisitor for Touch {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            let _ = param.val();
-        }
-    }
-    module.visit(&mut Touch);
 }
 
 /// Adam with the given ε (the optimiser of every learner).

@@ -10,13 +10,14 @@
 //! [`slice_pack`]): a stacked run's checkpoint is a solo run's, and one written before stacking
 //! loads as S = 1.
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
-use burn::nn::LinearConfig;
+use burn::nn::{LayerNorm, Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Bytes;
+use burn::tensor::module::layer_norm;
 use burn_pack::{Reader, Writer};
 
 use super::tensors::to_vec;
-use crate::acting::Dense;
+use crate::acting::{Dense, Norm};
 
 /// `y = x·W + b` for each of S runs: `W` `[S, in, out]`, `b` `[S, out]`, on inputs `[S, B, in]`.
 /// Its fields carry the names of burn's `Linear`, so that a slice's record reads as one.
@@ -30,10 +31,16 @@ impl StackedLinear {
     /// One run's layer (S = 1), drawn from the device's generator as burn's
     /// `LinearConfig::new(input, output)` draws it (weight, then bias; Kaiming-uniform by fan-in).
     pub fn new(input: usize, output: usize, device: &Device) -> StackedLinear {
-        let layer = LinearConfig::new(input, output).init(device);
+        StackedLinear::from_burn(&LinearConfig::new(input, output).init(device))
+    }
+
+    /// burn's layer as a one-run stack (its weight drawn first, then its bias, if they are
+    /// not yet drawn).
+    pub fn from_burn(layer: &Linear) -> StackedLinear {
         let weight = layer.weight.val().unsqueeze_dim::<3>(0);
         let bias = layer
             .bias
+            .as_ref()
             .expect("burn's linear layers have a bias by default")
             .val()
             .unsqueeze_dim::<2>(0);
@@ -56,6 +63,63 @@ impl StackedLinear {
             output,
             weight: to_vec(self.weight.val().slice(slice..slice + 1)),
             bias: to_vec(self.bias.val().slice(slice..slice + 1)),
+        }
+    }
+}
+
+/// burn's `LayerNorm` (ε = 1e-5) for each of S runs: scale `gamma` and shift `beta` `[S, width]`,
+/// named as burn's fields so that a slice's record reads as one.
+#[derive(Module, Debug)]
+pub struct StackedLayerNorm {
+    pub gamma: Param<Tensor<2>>,
+    pub beta: Param<Tensor<2>>,
+}
+
+impl StackedLayerNorm {
+    /// burn's `LayerNormConfig` default.
+    const EPSILON: f64 = 1e-5;
+
+    /// burn's layer as a one-run stack.
+    pub fn from_burn(layer: &LayerNorm) -> StackedLayerNorm {
+        let gamma = layer.gamma.val();
+        let beta = match &layer.beta {
+            Some(beta) => beta.val(),
+            None => gamma.zeros_like(),
+        };
+        StackedLayerNorm {
+            gamma: Param::from_tensor(gamma.unsqueeze_dim::<2>(0).detach()),
+            beta: Param::from_tensor(beta.unsqueeze_dim::<2>(0).detach()),
+        }
+    }
+
+    /// Normalises each run's `[…, width]` slice of `x` `[S, …, width]` over its last axis with
+    /// the run's scale and shift, through burn's fused kernel, one call per run on the run's
+    /// slice. A solo run (S = 1) takes the same slice and concatenation: the kernel's backward
+    /// on a slice of a tensor rounds otherwise than on the whole tensor, and a run must compute
+    /// the same numbers alone and in a stack.
+    pub fn forward<const D: usize>(&self, x: Tensor<D>) -> Tensor<D> {
+        let [runs, width] = self.gamma.val().dims();
+        let part = |p: &Param<Tensor<2>>, run: usize| p.val().narrow(0, run, 1).reshape([width]);
+        Tensor::cat(
+            (0..runs)
+                .map(|run| {
+                    layer_norm(
+                        x.clone().narrow(0, run, 1),
+                        part(&self.gamma, run),
+                        Some(part(&self.beta, run)),
+                        Self::EPSILON,
+                    )
+                })
+                .collect(),
+            0,
+        )
+    }
+
+    /// Slice `slice`'s scale and shift as plain numbers (for export).
+    pub fn norm(&self, slice: usize) -> Norm {
+        Norm {
+            scale: to_vec(self.gamma.val().narrow(0, slice, 1)),
+            shift: to_vec(self.beta.val().narrow(0, slice, 1)),
         }
     }
 }
