@@ -9,7 +9,7 @@
 #   - SAC trained end to end on InvertedPendulum with the learner on wgpu (1 update per step);
 #   - stacked runs (`dhrl train --seeds`) on wgpu, S = 1, 8, 64, 256: env steps per second
 #     summed over the runs, 1 update per step, SAC on InvertedPendulum and D2HPG on HalfCheetah
-#     (Δ = 5; D2HPG's runs have no stacked learner yet: they go one after the other).
+#     (Δ = 5; every algorithm's runs share one stacked learner pass).
 #
 #   scripts/gpu_check.sh                 build here (cargo, feature wgpu-learner) and run
 #   scripts/gpu_check.sh --pack DIR      build here and pack what a machine without a Rust
