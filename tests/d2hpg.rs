@@ -15,7 +15,7 @@ use dhrl::algos::{
     SacLearner, random_batch,
 };
 use dhrl::delay::Transitions;
-use dhrl::learn::{Devices, LearnDevice, lifting_loss, matrix, to_vec};
+use dhrl::learn::{Devices, LearnDevice, Noise, lifting_loss, matrix, to_vec};
 
 /// burn's generator is process-wide: networks built by concurrent tests would interleave draws.
 static BUILD: Mutex<()> = Mutex::new(());
@@ -117,7 +117,7 @@ fn bpql_critic_reads_the_true_state_and_its_actor_reads_x() {
     let plain = d.plain.clone();
     let m = |v: &[f32], cols: usize| matrix(v.to_vec(), n, cols, &plain).unsqueeze_dim::<3>(0);
     let alpha = copy.temperature.alphas()[0];
-    let eps = copy.noise[0].normal(n, act, &plain).unsqueeze_dim(0);
+    let eps = Noise::stacked_normal(&mut copy.noise[..1], n, act, &plain);
     let next = copy
         .actor
         .valid()

@@ -15,7 +15,8 @@ use dhrl::algos::{
     abstract_model_loss, gaussian_w2, lax_loss, random_batch,
 };
 use dhrl::learn::{
-    Devices, LearnDevice, Mlp, StackedLinear, TransitionTensors, lifting_loss, matrix, to_vec,
+    Devices, LearnDevice, Mlp, Noise, StackedLinear, TransitionTensors, lifting_loss, matrix,
+    to_vec,
 };
 
 /// burn's generator is process-wide: networks built by concurrent tests would interleave draws.
@@ -299,9 +300,12 @@ fn update_logs_l_lax_and_l_h_of_the_batch_it_was_given() {
         let mut noise = agent.model_noise[0].clone();
         let t = TransitionTensors::new(&b, &d.plain);
         let shift = 1 + noise.below(b.len() - 1);
-        let eps = noise
-            .normal(b.len(), config.latent_dim, &d.plain)
-            .unsqueeze_dim(0);
+        let eps = Noise::stacked_normal(
+            std::slice::from_mut(&mut noise),
+            b.len(),
+            config.latent_dim,
+            &d.plain,
+        );
         let state = h.abstract_state(t.augmented.clone());
         let action = h.abstract_action(t.augmented.clone(), t.action.clone());
         let transition = h.transition(state.clone(), action.clone());

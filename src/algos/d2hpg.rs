@@ -31,7 +31,9 @@ use super::context::UpdateContext;
 use super::sac::{Config as SacConfig, SacBatch, SacLearner, per_run};
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
-use crate::learn::{CheckpointDir, Devices, LearnError, Noise, lifting_loss, squashed_samples_k};
+use crate::learn::{
+    CheckpointDir, Devices, LearnError, Noise, lifting_loss, load_json_stack, squashed_samples_k,
+};
 use crate::seeds;
 
 crate::algo_config! {
@@ -342,10 +344,7 @@ impl Agent for D2hpg {
     fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
         self.regular.load(dirs, "regular_")?;
         self.delay_free.load(dirs, "delay_free_")?;
-        self.lifting_noise = dirs
-            .iter()
-            .map(|dir| CheckpointDir::new(dir).load_json("lifting_noise.json"))
-            .collect::<Result<_, _>>()?;
+        self.lifting_noise = load_json_stack(&CheckpointDir::each(dirs, ""), "lifting_noise.json")?;
         Ok(())
     }
 }

@@ -63,7 +63,7 @@ use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
     CheckpointDir, Devices, LearnError, Mlp, MlpConfig, Noise, TransitionTensors, adam, batch_mean,
-    lifting_loss, load_optimizer_stack, load_stack, squashed_samples_k, stack,
+    lifting_loss, load_json_stack, load_optimizer_stack, load_stack, squashed_samples_k, stack,
 };
 use crate::seeds;
 
@@ -748,18 +748,15 @@ impl Agent for D2hpgPrincipled {
     fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
         self.regular.load(dirs, "regular_")?;
         self.abstract_learner.load(dirs, "abstract_")?;
-        let files: Vec<CheckpointDir> = dirs.iter().map(|dir| CheckpointDir::new(dir)).collect();
+        let files = CheckpointDir::each(dirs, "");
         self.homomorphism = load_stack(&files, "homomorphism.bpk", self.homomorphism.clone())?;
         self.homomorphism_opt = load_optimizer_stack(
             &files,
             "homomorphism_adam.bpk",
             self.homomorphism_opt.clone(),
         )?;
-        let streams = |name: &str| -> Result<Vec<Noise>, LearnError> {
-            files.iter().map(|files| files.load_json(name)).collect()
-        };
-        self.model_noise = streams("model_noise.json")?;
-        self.lifting_noise = streams("lifting_noise.json")?;
+        self.model_noise = load_json_stack(&files, "model_noise.json")?;
+        self.lifting_noise = load_json_stack(&files, "lifting_noise.json")?;
         Ok(())
     }
 }

@@ -31,7 +31,7 @@ use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats, per_run};
 use crate::acting::{ActingNetwork, RolloutModel};
 use crate::delay::{BatchExtras, ReplayError, Transitions};
 use crate::learn::{
-    CheckpointDir, Devices, LearnError, Mlp, MlpConfig, TransitionTensors, adam,
+    CheckpointDir, Devices, LearnError, Mlp, MlpConfig, TransitionTensors, adam, load_json_stack,
     load_optimizer_stack, load_stack, matrix, slice, stack, stacked_rows, to_vec,
 };
 use crate::seeds;
@@ -427,14 +427,11 @@ impl Agent for DelayedSac {
 
     fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
         self.learner.load(dirs, "")?;
-        let files: Vec<CheckpointDir> = dirs.iter().map(|dir| CheckpointDir::new(dir)).collect();
+        let files = CheckpointDir::each(dirs, "");
         self.model.network = load_stack(&files, "model.bpk", self.model.network.clone())?;
         self.model_opt = load_optimizer_stack(&files, "model_adam.bpk", self.model_opt.clone())?;
-        let moments = files
-            .iter()
-            .map(|files| files.load_json::<Option<InputMoments>>("model_inputs.json"))
-            .collect::<Result<Option<Vec<_>>, _>>()?;
-        self.model.moments = moments;
+        let moments: Vec<Option<InputMoments>> = load_json_stack(&files, "model_inputs.json")?;
+        self.model.moments = moments.into_iter().collect();
         Ok(())
     }
 }
@@ -531,13 +528,7 @@ mod tests {
         let mut agent = DelayedSac::new(&Config::default(), &spec(3), &devices, &[0]);
         agent.model = linear_model(&devices.plain);
         let acted = agent.act(&[1.0, 1.0, -1.0, 0.5], 1, ActMode::Deterministic);
-        let policy_at = |s: f32| {
-            to_vec(
-                agent
-                    .learner
-                    .exploit(matrix(vec![s], 1, 1, &devices.plain).unsqueeze_dim(0)),
-            )
-        };
+        let mut policy_at = |s: f32| agent.learner.act_run(0, &[s], 1, 1, ActMode::Deterministic);
         assert_eq!(acted, policy_at(5.875));
         assert_ne!(acted, policy_at(3.5));
         assert_ne!(acted, policy_at(1.0));

@@ -20,8 +20,8 @@ use crate::delay::{ReplayError, Transitions};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, Temperature,
     TransitionTensors, TwinQ, actor_loss, adam, batch_mean, critic_loss, critic_target,
-    load_optimizer_stack, load_stack, polyak, slice, squashed_sample, stack, stacked_rows,
-    temperature_loss, to_vec,
+    load_json_stack, load_optimizer_stack, load_stack, polyak, slice, squashed_sample, stack,
+    stacked_rows, temperature_loss, to_vec,
 };
 
 crate::algo_config! {
@@ -294,11 +294,6 @@ impl SacLearner {
         Noise::stacked_normal(&mut self.noise, rows, self.act_dim, &self.devices.plain)
     }
 
-    /// The deterministic action `tanh(μ)` per row, `[S, B, A]`.
-    pub fn exploit(&self, input: Tensor<3>) -> Tensor<3> {
-        self.actor.valid().mode(input, &self.scale)
-    }
-
     /// Actions `[rows, act_dim]` of run `run` for its `rows` inputs of width `width`
     /// (row-major), from its policy and its noise stream.
     pub fn act_run(
@@ -493,10 +488,7 @@ impl SacLearner {
 
     /// Restores what [`SacLearner::save`] wrote with the same `prefix`, run `i` from `dirs[i]`.
     pub fn load(&mut self, dirs: &[&Path], prefix: &str) -> Result<(), LearnError> {
-        let files: Vec<CheckpointDir> = dirs
-            .iter()
-            .map(|dir| CheckpointDir::with_prefix(dir, prefix))
-            .collect();
+        let files = CheckpointDir::each(dirs, prefix);
         self.actor = load_stack(&files, "actor.bpk", self.actor.clone())?;
         self.critic = load_stack(&files, "critic.bpk", self.critic.clone())?;
         self.target = load_stack(&files, "critic_target.bpk", self.target.clone())?.valid();
@@ -505,10 +497,7 @@ impl SacLearner {
         self.critic_opt = load_optimizer_stack(&files, "critic_adam.bpk", self.critic_opt.clone())?;
         self.temperature_opt =
             load_optimizer_stack(&files, "temperature_adam.bpk", self.temperature_opt.clone())?;
-        self.noise = files
-            .iter()
-            .map(|files| files.load_json("noise.json"))
-            .collect::<Result<_, _>>()?;
+        self.noise = load_json_stack(&files, "noise.json")?;
         Ok(())
     }
 }

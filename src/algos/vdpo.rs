@@ -51,8 +51,8 @@ use crate::acting::{ActingNetwork, BeliefTransformer, TransformerBlock};
 use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, StackedLayerNorm,
-    StackedLinear, TransitionTensors, adam, load_optimizer_stack, load_stack, slice, stack,
-    stacked_rows, to_vec,
+    StackedLinear, TransitionTensors, adam, load_json_stack, load_optimizer_stack, load_stack,
+    slice, stack, stacked_rows, to_vec,
 };
 use crate::seeds;
 
@@ -838,16 +838,13 @@ impl Agent for Vdpo {
 
     fn load_runs(&mut self, dirs: &[&Path]) -> Result<(), LearnError> {
         self.reference.load(dirs, "reference_")?;
-        let files: Vec<CheckpointDir> = dirs.iter().map(|dir| CheckpointDir::new(dir)).collect();
+        let files = CheckpointDir::each(dirs, "");
         self.belief = load_stack(&files, "belief.bpk", self.belief.clone())?;
         self.policy_head = load_stack(&files, "policy_head.bpk", self.policy_head.clone())?;
         self.belief_opt = load_optimizer_stack(&files, "belief_adam.bpk", self.belief_opt.clone())?;
         self.policy_head_opt =
             load_optimizer_stack(&files, "policy_head_adam.bpk", self.policy_head_opt.clone())?;
-        self.schedules = files
-            .iter()
-            .map(|files| files.load_json("vdpo.json"))
-            .collect::<Result<_, _>>()?;
+        self.schedules = load_json_stack(&files, "vdpo.json")?;
         Ok(())
     }
 }

@@ -28,6 +28,13 @@ impl<'a> CheckpointDir<'a> {
         CheckpointDir { dir, prefix }
     }
 
+    /// The folders of a stack's runs, in run order, each with `prefix`.
+    pub fn each(dirs: &[&'a Path], prefix: &'a str) -> Vec<CheckpointDir<'a>> {
+        dirs.iter()
+            .map(|dir| CheckpointDir::with_prefix(dir, prefix))
+            .collect()
+    }
+
     fn path(&self, name: &str) -> PathBuf {
         self.dir.join(format!("{}{name}", self.prefix))
     }
@@ -144,6 +151,14 @@ pub fn load_optimizer_stack(
     optimizer
         .from_bytes(stacked_bytes(slices, name)?)
         .map_err(|e| load_error(&what, e))
+}
+
+/// Each run's JSON value saved as `name` in `slices[i]`, in run order.
+pub fn load_json_stack<T: DeserializeOwned>(
+    slices: &[CheckpointDir<'_>],
+    name: &str,
+) -> Result<Vec<T>, LearnError> {
+    slices.iter().map(|dir| dir.load_json(name)).collect()
 }
 
 /// `name` in the first slice's folder: what errors about a stacked record name.

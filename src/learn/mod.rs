@@ -14,7 +14,7 @@ mod tensors;
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
 pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};
-pub use io::{CheckpointDir, load_optimizer_stack, load_stack};
+pub use io::{CheckpointDir, load_json_stack, load_optimizer_stack, load_stack};
 pub use losses::{
     actor_loss, batch_mean, critic_loss, critic_target, lifting_loss, polyak,
     squashed_gaussian_log_prob, temperature_loss,
@@ -27,7 +27,7 @@ pub use noise::Noise;
 pub use stack::{StackedLayerNorm, StackedLinear, slice, slice_pack, stack, stack_packs};
 #[cfg(test)]
 pub(crate) use tensors::assert_close;
-pub use tensors::{TransitionTensors, matrix, rows, stacked_rows, to_vec};
+pub use tensors::{TransitionTensors, matrix, stacked_rows, to_vec};
 
 /// What can go wrong while learning, saving or loading.
 #[derive(Debug, thiserror::Error)]

@@ -6,8 +6,6 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use super::tensors::matrix;
-
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Noise {
     rng: ChaCha8Rng,
@@ -30,11 +28,6 @@ impl Noise {
         (0..n)
             .map(|_| StandardNormal.sample(&mut self.rng))
             .collect()
-    }
-
-    /// A `[rows, cols]` tensor of independent N(0, 1) draws.
-    pub fn normal(&mut self, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
-        matrix(self.normal_values(rows * cols), rows, cols, device)
     }
 
     /// A `[S, rows, cols]` tensor: slice `i` is `[rows, cols]` draws from `streams[i]` (each run

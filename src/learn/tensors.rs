@@ -8,12 +8,6 @@ pub fn matrix(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Te
     Tensor::from_data(TensorData::new(values, [rows, cols]), device)
 }
 
-/// `[rows, len / rows]` on `device`.
-pub fn rows(values: Vec<f32>, rows: usize, device: &Device) -> Tensor<2> {
-    let cols = values.len() / rows.max(1);
-    matrix(values, rows, cols, device)
-}
-
 /// The batches of a stack's runs as `[S, B, ·]` tensors (a solo run's `[1, B, ·]`), one upload
 /// per field; each algorithm chooses which of them its networks condition on.
 #[derive(Debug, Clone)]
