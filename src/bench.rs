@@ -370,15 +370,18 @@ pub fn bench_update(
     let seconds = pool.install(|| {
         // One environment step per update, as training's default: work an agent schedules by
         // environment steps (VDPO's cloning stage) runs on its schedule and is in the mean.
-        let mut update = |k: usize| {
-            agent
-                .update(&mut UpdateContext::fixed(&batch, k as u64, k as u64))
-                .map(|_| ())
-        };
-        update(0)?; // warm-up: allocations, lazy initialisation
+        // The statistics stay on the device, as in training; downloading the last update's
+        // waits for the device to finish the work queued (a GPU runs ahead of the host).
+        let mut update =
+            |k: usize| agent.update(&mut UpdateContext::fixed(&batch, k as u64, k as u64));
+        update(0)?.values(); // warm-up: allocations, lazy initialisation
         let start = Instant::now();
+        let mut last = None;
         for k in 0..updates {
-            update(k + 1)?;
+            last = Some(update(k + 1)?);
+        }
+        if let Some(stats) = last {
+            stats.values();
         }
         Ok::<f64, crate::delay::ReplayError>(start.elapsed().as_secs_f64())
     })?;

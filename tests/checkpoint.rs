@@ -8,17 +8,19 @@
 mod common;
 
 use dhrl::algos::{
-    ActMode, Agent, AgentSpec, AlgoSettings, Stats, UpdateContext, names, random_batch,
+    ActMode, Agent, AgentSpec, AlgoSettings, RunStats, UpdateContext, names, random_batch,
 };
 use dhrl::learn::{Devices, LearnDevice};
 
 /// Update `k` of a run, `k` thousand environment steps in: what an agent does on a schedule
 /// (the actor every other update, VDPO's cloning stage every 1,000 steps) runs too.
-fn advance(agent: &mut dyn Agent, spec: &AgentSpec, k: u64) -> Stats {
+fn advance(agent: &mut dyn Agent, spec: &AgentSpec, k: u64) -> RunStats {
     let batch = random_batch(spec, 32, 100 + k);
     agent
         .update(&mut UpdateContext::fixed(&batch, 1000 * k, k))
         .expect("a fixed batch is never empty")
+        .values()
+        .remove(0)
 }
 
 #[test]

@@ -140,7 +140,8 @@ fn temperature_loss_and_its_gradient_match_hand_values_per_run() {
     ]);
     // J(α) = −α(mean log π + H̄): run 0 −0.2·(−2 − 1) = 0.6, run 1 −0.5·(0.5 − 1) = 0.25; each
     // run's gradient dJ/d log α is its own J (the losses are summed over the stack).
-    let loss = temperature_loss(temperature.log_alpha.val(), &[-2.0, 0.5], -1.0);
+    let mean_log_prob = matrix(vec![-2.0, 0.5], 1, 2, &d.plain).reshape([-1]);
+    let loss = temperature_loss(temperature.log_alpha.val(), mean_log_prob, -1.0);
     let values = to_vec(loss.clone().inner());
     close(values[0], 0.6, 1e-6);
     close(values[1], 0.25, 1e-6);

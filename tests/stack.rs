@@ -10,7 +10,7 @@ use burn::optim::GradientsParams;
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 use common::{parameters, small_spec};
-use dhrl::algos::{ActMode, AgentSpec, SacBatch, SacConfig, SacLearner, SacStats, random_batch};
+use dhrl::algos::{ActMode, AgentSpec, RunStats, SacBatch, SacConfig, SacLearner, random_batch};
 use dhrl::delay::Transitions;
 use dhrl::learn::{Devices, LearnDevice, StackedLinear, TransitionTensors, stack, to_vec};
 
@@ -173,11 +173,14 @@ fn a_stack_of_three_sac_learners_is_three_solo_learners_bit_for_bit() {
     );
     for update in 0..updates {
         let batches = transitions(&spec, seeds.iter().map(|&seed| seed * 100 + update));
-        let stats = stack_learner.update(&on_state(&batches, &d));
-        let solo_stats: Vec<SacStats> = solos
+        let stats = stack_learner.update(&on_state(&batches, &d)).values();
+        let solo_stats: Vec<RunStats> = solos
             .iter_mut()
             .zip(&batches)
-            .map(|(learner, batch)| learner.update(&on_state(std::slice::from_ref(batch), &d))[0])
+            .map(|(learner, batch)| {
+                let stats = learner.update(&on_state(std::slice::from_ref(batch), &d));
+                stats.values().remove(0)
+            })
             .collect();
         assert_eq!(stats, solo_stats, "update {update}'s statistics");
     }
@@ -204,6 +207,31 @@ fn a_stack_of_three_sac_learners_is_three_solo_learners_bit_for_bit() {
                 "run {i}'s {mode:?} actions"
             );
         }
+    }
+    // Acting in one pass for the whole stack, as training does: run i acts for its first
+    // counts[i] rows of two (the others padding) as its solo learner does given the same rows.
+    let counts = [2, 1, 0];
+    for mode in [ActMode::Deterministic, ActMode::Explore] {
+        let together = stack_learner.act_runs(&states, &counts, 2, obs, mode);
+        for (i, solo) in solos.iter_mut().enumerate() {
+            let rows = &states[i * 2 * obs..(i + 1) * 2 * obs];
+            let alone = solo.act_runs(rows, &counts[i..=i], 2, obs, mode);
+            let act = spec.act_dim;
+            assert_eq!(
+                bits(&together[i * 2 * act..(i * 2 + counts[i]) * act]),
+                bits(&alone[..counts[i] * act]),
+                "run {i}'s {mode:?} actions in one pass of the stack"
+            );
+        }
+    }
+    // The streams moved alike: the next draws agree too.
+    for (i, solo) in solos.iter_mut().enumerate() {
+        let rows = &states[i * 2 * obs..(i + 1) * 2 * obs];
+        assert_eq!(
+            bits(&stack_learner.act_run(i, rows, 2, obs, ActMode::Explore)),
+            bits(&solo.act_run(0, rows, 2, obs, ActMode::Explore)),
+            "run {i}'s noise stream after acting in one pass"
+        );
     }
 }
 
@@ -244,11 +272,11 @@ fn each_run_of_a_stack_is_saved_as_a_solo_run_and_the_stack_resumes_exactly() {
         );
     }
     let next = batches(1);
-    let after = original.update(&on_state(&next, &d));
-    assert_eq!(resumed.update(&on_state(&next, &d)), after);
+    let after = original.update(&on_state(&next, &d)).values();
+    assert_eq!(resumed.update(&on_state(&next, &d)).values(), after);
     for (i, solo) in solos.iter_mut().enumerate() {
         let alone = solo.update(&on_state(std::slice::from_ref(&next[i]), &d));
-        assert_eq!(alone[0], after[i], "run {i} resumed alone");
+        assert_eq!(alone.values()[0], after[i], "run {i} resumed alone");
     }
 }
 

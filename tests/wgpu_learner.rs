@@ -133,7 +133,7 @@ fn every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu() {
                     .iter()
                     .map(|batch| UpdateContext::fixed(batch, 1000 * step, step))
                     .collect();
-                agent.update_runs(&mut contexts).unwrap()
+                agent.update_runs(&mut contexts).unwrap().values()
             };
             let (a, b) = (update(on_cpu.as_mut()), update(on_gpu.as_mut()));
             assert_eq!(a.len(), 2, "{algo}: one set of statistics per run");
@@ -186,6 +186,18 @@ fn every_algorithm_stacked_updates_the_same_on_wgpu_as_on_cpu() {
                 &a,
                 &b,
                 &format!("{algo} run {run}: on wgpu, saved and loaded on the CPU"),
+            );
+        }
+        // Both runs in one pass, run 1 acting for half its rows.
+        let both = [probe.augmented.as_slice(), probe.augmented.as_slice()].concat();
+        for mode in [ActMode::Deterministic, ActMode::Explore] {
+            let act = |agent: &mut Box<dyn Agent>| agent.act_runs(&both, &[16, 8], 16, mode);
+            let (a, b) = (act(&mut on_cpu), act(&mut on_gpu));
+            let acted = |actions: &[f32]| [&actions[..32], &actions[32..48]].concat();
+            assert_actions_close(
+                &acted(&a),
+                &acted(&b),
+                &format!("{algo}: {mode:?} in one pass of both runs on CPU, wgpu"),
             );
         }
         let learns_delay_free = settings.info().delay_free_policy;

@@ -6,6 +6,7 @@ use std::path::Path;
 use serde::{Serialize, de::DeserializeOwned};
 
 use super::context::UpdateContext;
+use super::stats::Stats;
 use crate::acting::ActingNetwork;
 use crate::delay::{BatchExtras, ReplayError, Transitions};
 use crate::learn::{Devices, LearnError};
@@ -54,9 +55,6 @@ pub enum ActMode {
     Deterministic,
 }
 
-/// Named statistics of one update, a subset of the agent's [`Agent::stat_names`].
-pub type Stats = Vec<(&'static str, f64)>;
-
 /// What the training loop needs of an algorithm: a stack of S runs of one configuration, their
 /// seeds apart, trained side by side, each with its own batches, random streams and folder (a
 /// solo run is S = 1). The one-run methods (`act`, `update`, `save`, `load`) are run 0's, for
@@ -67,12 +65,21 @@ pub trait Agent: Send {
     /// Actions `[rows, act_dim]` of run `run` for `rows` augmented states
     /// `[rows, obs + Δ·act]`.
     fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32>;
-    /// One update of every run, run `i` drawing its batches from `contexts[i]` (as many as it
-    /// needs); each run's statistics computed this time (an absent one is logged empty).
-    fn update_runs(
+    /// Actions of every run in one pass (one upload, one download): `augmented` is
+    /// `[S, rows, obs + Δ·act]`, run `i`'s `counts[i]` states first in slice `i` and padding
+    /// after them; returns `[S, rows, act_dim]`, whose padding rows mean nothing. Run `i` draws
+    /// exploration noise for its `counts[i]` rows only, as a solo run given the same rows does.
+    fn act_runs(
         &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError>;
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32>;
+    /// One update of every run, run `i` drawing its batches from `contexts[i]` (as many as it
+    /// needs); the statistics computed this time, on the device (an absent one is logged
+    /// empty).
+    fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError>;
     /// Run `i`'s networks, optimiser states and random streams into `dirs[i]`, each as a solo
     /// run of its seed writes them.
     fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError>;
@@ -98,7 +105,7 @@ pub trait Agent: Send {
     }
     /// [`Agent::update_runs`] of a solo agent.
     fn update(&mut self, ctx: &mut UpdateContext<'_>) -> Result<Stats, ReplayError> {
-        Ok(self.update_runs(std::slice::from_mut(ctx))?.remove(0))
+        self.update_runs(std::slice::from_mut(ctx))
     }
     /// [`Agent::save_runs`] of a solo agent.
     fn save(&self, dir: &Path) -> Result<(), LearnError> {
@@ -162,6 +169,10 @@ pub struct AlgoInfo {
     pub delayed_only: bool,
     /// Learners updated side by side (rayon threads an update can use to advantage).
     pub learner_threads: usize,
+    /// The runs one learner pass serves on the CPU unless `--runs-per-pass` says otherwise: 2
+    /// where a pass of two costs what two runs cost, 1 where it costs more (VDPO, whose
+    /// activations alone fill the cache: docs/results/stacking.md).
+    pub cpu_runs_per_pass: usize,
     /// Fields shown in plot labels: `(symbol, field)`, e.g. `("λ", "lifting_weight")`.
     pub label_fields: &'static [(&'static str, &'static str)],
 }
@@ -185,6 +196,7 @@ impl AlgoInfo {
             undelayed_only: false,
             delayed_only: false,
             learner_threads: 1,
+            cpu_runs_per_pass: 2,
             label_fields: &[],
         }
     }

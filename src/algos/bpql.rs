@@ -13,9 +13,10 @@ use std::path::Path;
 
 use burn::prelude::Device;
 
-use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats};
+use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats};
+use super::sac::{Config as SacConfig, SAC_STATS, SacBatch, SacLearner};
+use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::{ReplayError, Transitions};
 use crate::learn::{Devices, LearnError, TransitionTensors};
@@ -94,7 +95,7 @@ impl Agent for Bpql {
     }
 
     fn stat_names(&self) -> Vec<&'static str> {
-        SacStats::NAMES.to_vec()
+        SAC_STATS.to_vec()
     }
 
     fn runs(&self) -> usize {
@@ -106,10 +107,18 @@ impl Agent for Bpql {
         self.learner.act_run(run, augmented, rows, width, mode)
     }
 
-    fn update_runs(
+    fn act_runs(
         &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError> {
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let width = self.spec.augmented_dim();
+        self.learner.act_runs(augmented, counts, rows, width, mode)
+    }
+
+    fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         self.learner.update_runs(contexts, beta_batch)
     }
 

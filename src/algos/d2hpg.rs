@@ -23,12 +23,12 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::agent::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role,
-    Stats, check,
+    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role, check,
 };
 use super::bpql::{beta_batch, bpql_learner};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, SacBatch, SacLearner, per_run};
+use super::sac::{Config as SacConfig, SacBatch, SacLearner};
+use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
@@ -89,6 +89,7 @@ const D2HPG_INFO: AlgoInfo = AlgoInfo {
     undelayed_only: false,
     delayed_only: false,
     learner_threads: 2,
+    cpu_runs_per_pass: 2,
     label_fields: &[("λ", "lifting_weight"), ("K", "lifting_samples")],
 };
 
@@ -207,6 +208,17 @@ impl Agent for D2hpg {
             .act_run(run, augmented, rows, self.spec.augmented_dim(), mode)
     }
 
+    fn act_runs(
+        &mut self,
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let width = self.spec.augmented_dim();
+        self.regular.act_runs(augmented, counts, rows, width, mode)
+    }
+
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::Policy {
             input: PolicyInput::AugmentedState,
@@ -234,10 +246,7 @@ impl Agent for D2hpg {
             .collect()
     }
 
-    fn update_runs(
-        &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError> {
+    fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         let plain = self.regular.devices.plain.clone();
         let regular_batch = beta_batch(&UpdateContext::batches(contexts)?, &plain);
         // The delay-free learner: actor and critics on the true state.
@@ -254,8 +263,8 @@ impl Agent for D2hpg {
         let with_bpql = self.regular_kind == Regular::Bpql;
         let (regular, delay_free) = (&mut self.regular, &mut self.delay_free);
         let (alphas, free_alphas) = (
-            regular.temperature.alphas(),
-            delay_free.temperature.alphas(),
+            regular.temperature.alpha_values(),
+            delay_free.temperature.alpha_values(),
         );
 
         // 1. The critics of both learners (the pseudo-code's joint critic step): the beta
@@ -289,7 +298,7 @@ impl Agent for D2hpg {
         );
         let regular_actions = squashed_samples_k(regular_distribution.clone(), eps, &regular.scale);
         let lifting = lifting_loss(regular_actions, free_actions);
-        let lifting_values = per_run(lifting.clone());
+        let lifting_values = lifting.clone().inner();
         let lift = lifting.mul_scalar(self.lifting_weight).sum();
 
         // 3. The policies, side by side again: `d2hpg` takes BPQL's actor step with λ·L_lift
@@ -309,27 +318,25 @@ impl Agent for D2hpg {
             || delay_free.update_policy(&free_batch, free_distribution, None),
         );
 
-        Ok((0..self.regular.runs())
-            .map(|run| {
-                let mut stats: Stats = FREE_STATS
+        let mut stats = Stats::new();
+        for (name, values) in
+            FREE_STATS
+                .into_iter()
+                .zip([free_critic_losses, free_actor_losses, free_alphas])
+        {
+            stats.push(name, values);
+        }
+        if let (Some(critic_losses), Some(actor_losses)) = (critic_losses, actor_losses) {
+            for (name, values) in
+                REGULAR_STATS
                     .into_iter()
-                    .zip([
-                        free_critic_losses[run],
-                        free_actor_losses[run],
-                        free_alphas[run],
-                    ])
-                    .collect();
-                if let (Some(critic_losses), Some(actor_losses)) = (&critic_losses, &actor_losses) {
-                    stats.extend(REGULAR_STATS.into_iter().zip([
-                        critic_losses[run],
-                        actor_losses[run],
-                        alphas[run],
-                    ]));
-                }
-                stats.push((LIFTING_STAT, lifting_values[run]));
-                stats
-            })
-            .collect())
+                    .zip([critic_losses, actor_losses, alphas])
+            {
+                stats.push(name, values);
+            }
+        }
+        stats.push(LIFTING_STAT, lifting_values);
+        Ok(stats)
     }
 
     fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {

@@ -53,12 +53,11 @@ use burn::prelude::*;
 use burn::tensor::activation::sigmoid;
 use serde::{Deserialize, Serialize};
 
-use super::agent::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Role, Stats, check,
-};
+use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Role, check};
 use super::context::UpdateContext;
 use super::d2hpg::check_lifting;
-use super::sac::{Config as SacConfig, SacBatch, SacLearner, per_run};
+use super::sac::{Config as SacConfig, SacBatch, SacLearner};
+use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
@@ -175,6 +174,7 @@ impl AlgoConfig for Config {
         undelayed_only: false,
         delayed_only: false,
         learner_threads: 2,
+        cpu_runs_per_pass: 2,
         label_fields: &[
             ("λ", "lifting_weight"),
             ("d", "latent_dim"),
@@ -519,7 +519,7 @@ impl D2hpgPrincipled {
 
     /// Line 23: one Adam step of `h`, `P̄_τ` and `R̄_ν` on `lax_weight·L_lax + L_h`, summed
     /// over the runs. Returns each run's L_lax and L_h.
-    fn update_homomorphism(&mut self, t: &TransitionTensors) -> (Vec<f64>, Vec<f64>) {
+    fn update_homomorphism(&mut self, t: &TransitionTensors) -> (Tensor<1>, Tensor<1>) {
         let plain = &self.regular.devices.plain;
         let rows = t.reward.dims()[1];
         // Per run: a shift in 1..rows pairs no sample with itself; ε is drawn whatever the
@@ -551,7 +551,7 @@ impl D2hpgPrincipled {
             (predicted_reward, t.reward.clone()),
             self.config.transition_loss,
         );
-        let values = (per_run(lax.clone()), per_run(model.clone()));
+        let values = (lax.clone().inner(), model.clone().inner());
         let loss = (lax.mul_scalar(self.config.lax_weight) + model).sum();
         let grads = GradientsParams::from_grads(loss.backward(), &self.homomorphism);
         self.homomorphism = self.homomorphism_opt.step(
@@ -595,6 +595,17 @@ impl Agent for D2hpgPrincipled {
             .act_run(run, augmented, rows, self.spec.augmented_dim(), mode)
     }
 
+    fn act_runs(
+        &mut self,
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let width = self.spec.augmented_dim();
+        self.regular.act_runs(augmented, counts, rows, width, mode)
+    }
+
     fn acting_network(&self) -> ActingNetwork {
         ActingNetwork::Policy {
             input: PolicyInput::AugmentedState,
@@ -618,10 +629,7 @@ impl Agent for D2hpgPrincipled {
             .collect()
     }
 
-    fn update_runs(
-        &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError> {
+    fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         let plain = self.regular.devices.plain.clone();
         let t = TransitionTensors::stacked(&UpdateContext::batches(contexts)?, &plain);
         // 22–23. The homomorphism and the abstract model.
@@ -640,8 +648,8 @@ impl Agent for D2hpgPrincipled {
         let (act, abstract_act) = (self.spec.act_dim, self.abstract_spec.act_dim);
         let (regular, abstract_learner) = (&mut self.regular, &mut self.abstract_learner);
         let (alphas, abstract_alphas) = (
-            regular.temperature.alphas(),
-            abstract_learner.temperature.alphas(),
+            regular.temperature.alpha_values(),
+            abstract_learner.temperature.alpha_values(),
         );
 
         // 24. Both critics, and both policies' distributions before either policy moves. The
@@ -681,7 +689,7 @@ impl Agent for D2hpgPrincipled {
             .homomorphism
             .abstract_actions_k(t.augmented.clone(), regular_actions);
         let lifting = lifting_loss(lifted, abstract_actions);
-        let lifting_values = per_run(lifting.clone());
+        let lifting_values = lifting.clone().inner();
         let weighted_lifting = lifting.mul_scalar(self.config.lifting_weight).sum();
 
         // 25–26, 28. The policies side by side: the regular one by BPQL's actor step with
@@ -707,29 +715,22 @@ impl Agent for D2hpgPrincipled {
             || abstract_learner.update_policy(&abstract_batch, abstract_distribution, None),
         );
 
-        Ok((0..self.regular.runs())
-            .map(|run| {
-                let mut stats: Stats = MODEL_STATS
-                    .into_iter()
-                    .zip([lax[run], model[run]])
-                    .collect();
-                stats.extend(ABSTRACT_STATS.into_iter().zip([
-                    abstract_critic_losses[run],
-                    abstract_actor_losses[run],
-                    abstract_alphas[run],
-                ]));
-                stats.extend(
-                    CRITIC_STATS
-                        .into_iter()
-                        .zip([critic_losses[run], alphas[run]]),
-                );
-                if let Some(actor_losses) = &actor_losses {
-                    stats.push((ACTOR_STAT, actor_losses[run]));
-                }
-                stats.push((LIFTING_STAT, lifting_values[run]));
-                stats
-            })
-            .collect())
+        let mut stats = Stats::new();
+        let named = MODEL_STATS
+            .into_iter()
+            .zip([lax, model])
+            .chain(ABSTRACT_STATS.into_iter().zip([
+                abstract_critic_losses,
+                abstract_actor_losses,
+                abstract_alphas,
+            ]))
+            .chain(CRITIC_STATS.into_iter().zip([critic_losses, alphas]))
+            .chain(actor_losses.map(|losses| (ACTOR_STAT, losses)))
+            .chain([(LIFTING_STAT, lifting_values)]);
+        for (name, values) in named {
+            stats.push(name, values);
+        }
+        Ok(stats)
     }
 
     fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {

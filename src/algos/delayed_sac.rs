@@ -25,14 +25,15 @@ use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, check};
+use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, check};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, SacBatch, SacLearner, SacStats, per_run};
+use super::sac::{Config as SacConfig, SAC_STATS, SacBatch, SacLearner, host_input};
+use super::stats::Stats;
 use crate::acting::{ActingNetwork, RolloutModel};
 use crate::delay::{BatchExtras, ReplayError, Transitions};
 use crate::learn::{
     CheckpointDir, Devices, LearnError, Mlp, MlpConfig, TransitionTensors, adam, load_json_stack,
-    load_optimizer_stack, load_stack, matrix, slice, stack, stacked_rows, to_vec,
+    load_optimizer_stack, load_stack, matrix, select_runs, stack, stacked_rows, to_vec,
 };
 use crate::seeds;
 
@@ -268,17 +269,17 @@ impl DelayedSac {
         }
     }
 
-    /// Each run's Δ-step errors of its model on its batch: at `s_τ`, and the mean over
-    /// `s_{τ−Δ+1..τ}`.
+    /// Each run's errors of its model on its batch after 1, …, Δ steps, `[S]` each (the last
+    /// is the error at `s_τ`); none for Δ = 0.
     fn rollout_errors(
         &self,
         batches: &[Transitions],
         augmented: Tensor<3>,
         device: &Device,
-    ) -> Option<Vec<(f64, f64)>> {
+    ) -> Vec<Tensor<1>> {
         let (obs, delay) = (self.spec.obs_dim, self.spec.delay);
         if delay == 0 {
-            return None;
+            return Vec::new();
         }
         let predicted = self.model.rollout(
             &self.model.network.valid(),
@@ -291,19 +292,32 @@ impl DelayedSac {
             batches,
             device,
         );
-        let errors: Vec<Vec<f64>> = predicted
+        predicted
             .into_iter()
             .enumerate()
-            .map(|(k, p)| per_run(prediction_error(p, truth.clone().narrow(2, k * obs, obs))))
-            .collect();
-        Some(
-            (0..batches.len())
-                .map(|run| {
-                    let sum: f64 = errors.iter().map(|e| e[run]).sum();
-                    (errors[delay - 1][run], sum / delay as f64)
-                })
-                .collect(),
-        )
+            .map(|(k, p)| prediction_error(p, truth.clone().narrow(2, k * obs, obs)))
+            .collect()
+    }
+
+    /// Actions of the runs `runs` (the whole stack, or one run) for their augmented states
+    /// `[s, rows, aug]`: each run's model rolls its last observation forward through the
+    /// pending actions, and its policy acts on the predicted state.
+    fn act_tensor(
+        &mut self,
+        runs: std::ops::Range<usize>,
+        augmented: Tensor<3>,
+        counts: &[usize],
+        mode: ActMode,
+    ) -> Tensor<3> {
+        let plain = self.learner.devices.plain.clone();
+        let network = select_runs(self.model.network.valid(), runs.clone(), self.runs());
+        let normaliser = self.model.normaliser(runs.clone(), &plain);
+        let state = self
+            .model
+            .rollout(&network, &normaliser, augmented.clone(), &self.spec)
+            .pop()
+            .unwrap_or(augmented); // Δ = 0: x_t = s_t
+        self.learner.act_tensor(runs, state, counts, mode)
     }
 }
 
@@ -313,23 +327,21 @@ impl Agent for DelayedSac {
     }
 
     fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let plain = self.learner.devices.plain.clone();
         let aug = self.spec.augmented_dim();
-        let x = matrix(augmented[..rows * aug].to_vec(), rows, aug, &plain).unsqueeze_dim(0);
-        let network = match self.runs() {
-            1 => self.model.network.valid(),
-            _ => slice(&self.model.network.valid(), run),
-        };
-        let normaliser = self.model.normaliser(run..run + 1, &plain);
-        let (predicted, width) = match self
-            .model
-            .rollout(&network, &normaliser, x, &self.spec)
-            .pop()
-        {
-            Some(state) => (to_vec(state), self.spec.obs_dim),
-            None => (augmented[..rows * aug].to_vec(), aug), // Δ = 0: x_t = s_t
-        };
-        self.learner.act_run(run, &predicted, rows, width, mode)
+        let x = host_input(augmented, 1, rows, aug, &self.learner.devices.plain);
+        to_vec(self.act_tensor(run..run + 1, x, &[rows], mode))
+    }
+
+    fn act_runs(
+        &mut self,
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let (runs, aug) = (self.runs(), self.spec.augmented_dim());
+        let x = host_input(augmented, runs, rows, aug, &self.learner.devices.plain);
+        to_vec(self.act_tensor(0..runs, x, counts, mode))
     }
 
     fn acting_network(&self) -> ActingNetwork {
@@ -344,11 +356,7 @@ impl Agent for DelayedSac {
     }
 
     fn stat_names(&self) -> Vec<&'static str> {
-        SacStats::NAMES
-            .iter()
-            .chain(&MODEL_STATS)
-            .copied()
-            .collect()
+        SAC_STATS.iter().chain(&MODEL_STATS).copied().collect()
     }
 
     fn batch_extras(&self) -> BatchExtras {
@@ -357,17 +365,14 @@ impl Agent for DelayedSac {
         }
     }
 
-    fn update_runs(
-        &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError> {
+    fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         let batches = UpdateContext::batches(contexts)?;
         let plain = self.learner.devices.plain.clone();
         let t = TransitionTensors::stacked(&batches, &plain);
 
         // SAC on the true, time-aligned (s, a, r, s').
         let on_state = (t.state.clone(), t.next_state.clone());
-        let sac_stats = self
+        let mut stats = self
             .learner
             .update(&SacBatch::new(&t, on_state.clone(), on_state));
 
@@ -392,25 +397,18 @@ impl Agent for DelayedSac {
             t.action.clone(),
         );
         let losses = prediction_error(predicted, t.next_state);
-        let model_losses = per_run(losses.clone());
+        let model_losses = losses.clone().inner();
         let grads = GradientsParams::from_grads(losses.sum().backward(), &self.model.network);
         self.model.network =
             self.model_opt
                 .step(self.model_learning_rate, self.model.network.clone(), grads);
 
-        Ok(sac_stats
-            .iter()
-            .enumerate()
-            .map(|(run, sac)| {
-                let mut stats = sac.named();
-                stats.push((MODEL_STATS[0], model_losses[run]));
-                if let Some(rollout) = &rollout {
-                    let (at_state, mean) = rollout[run];
-                    stats.extend([(MODEL_STATS[1], at_state), (MODEL_STATS[2], mean)]);
-                }
-                stats
-            })
-            .collect())
+        stats.push(MODEL_STATS[0], model_losses);
+        if let Some(at_state) = rollout.last() {
+            stats.push(MODEL_STATS[1], at_state.clone());
+            stats.push_mean(MODEL_STATS[2], rollout);
+        }
+        Ok(stats)
     }
 
     fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {

@@ -2,8 +2,9 @@
 //! updated one after the other. Every run computes exactly what it computes alone.
 use std::path::Path;
 
-use super::agent::{ActMode, Agent, Stats};
+use super::agent::{ActMode, Agent};
 use super::context::UpdateContext;
+use super::stats::Stats;
 use crate::acting::ActingNetwork;
 use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::LearnError;
@@ -69,16 +70,32 @@ impl Agent for Independent {
         agent.act_run(run, augmented, rows, mode)
     }
 
-    fn update_runs(
+    fn act_runs(
         &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError> {
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let block = augmented.len() / counts.len();
+        let mut actions = Vec::new();
+        let (mut first, mut augmented) = (0, augmented);
+        for agent in &mut self.agents {
+            let runs = agent.runs();
+            let (part, rest) = augmented.split_at(runs * block);
+            actions.extend(agent.act_runs(part, &counts[first..first + runs], rows, mode));
+            (first, augmented) = (first + runs, rest);
+        }
+        actions
+    }
+
+    fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         let parts = self.per_agent(contexts);
         let mut stats = Vec::new();
         for (agent, contexts) in self.agents.iter_mut().zip(parts) {
-            stats.extend(agent.update_runs(contexts)?);
+            stats.push(agent.update_runs(contexts)?);
         }
-        Ok(stats)
+        Ok(Stats::concat_runs(stats))
     }
 
     fn save_runs(&self, dirs: &[&Path]) -> Result<(), LearnError> {

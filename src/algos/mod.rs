@@ -18,11 +18,12 @@ mod naive_sac;
 mod registry;
 mod sac;
 mod settings;
+mod stats;
 mod vdpo;
 
 pub use agent::{
     ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role,
-    Stats, check, random_batch, toml_value,
+    check, random_batch, toml_value,
 };
 pub use bpql::Bpql;
 pub use context::UpdateContext;
@@ -37,6 +38,7 @@ pub use registry::{
     proposed, reference,
 };
 pub use sac::{
-    Config as SacConfig, InputView, LearningRates, SacAgent, SacBatch, SacLearner, SacStats,
+    Config as SacConfig, InputView, LearningRates, SAC_STATS, SacAgent, SacBatch, SacLearner,
 };
 pub use settings::{AlgoSettings, parse_assignment};
+pub use stats::{RunStats, Stats};

@@ -11,17 +11,16 @@ use burn::module::Module;
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 
-use super::agent::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Role, Stats, check,
-};
+use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Role, check};
 use super::context::UpdateContext;
+use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::{ReplayError, Transitions};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, Temperature,
     TransitionTensors, TwinQ, actor_loss, adam, batch_mean, critic_loss, critic_target,
-    load_json_stack, load_optimizer_stack, load_stack, polyak, slice, squashed_sample, stack,
-    stacked_rows, temperature_loss, to_vec,
+    load_json_stack, load_optimizer_stack, load_stack, polyak, select_runs, squashed_sample, stack,
+    temperature_loss, to_vec, upload,
 };
 
 crate::algo_config! {
@@ -111,30 +110,8 @@ impl AlgoConfig for Config {
     }
 }
 
-/// Losses and temperature of one update.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct SacStats {
-    pub critic_loss: f64,
-    pub actor_loss: f64,
-    pub alpha: f64,
-    pub alpha_loss: f64,
-}
-
-impl SacStats {
-    /// Their `train.csv` columns.
-    pub const NAMES: [&'static str; 4] = ["critic_loss", "actor_loss", "alpha", "alpha_loss"];
-
-    /// The statistics as `train.csv` columns.
-    pub fn named(&self) -> Stats {
-        let values = [
-            self.critic_loss,
-            self.actor_loss,
-            self.alpha,
-            self.alpha_loss,
-        ];
-        Self::NAMES.into_iter().zip(values).collect()
-    }
-}
+/// The statistics of a SAC update, as `train.csv` columns: losses and temperature.
+pub const SAC_STATS: [&str; 4] = ["critic_loss", "actor_loss", "alpha", "alpha_loss"];
 
 /// One SAC batch: what the actor and the critics condition on (the same for SAC itself; the
 /// augmented state for the actor and the true state for the critics in BPQL), now and next.
@@ -304,29 +281,55 @@ impl SacLearner {
         width: usize,
         mode: ActMode,
     ) -> Vec<f32> {
-        let plain = self.devices.plain.clone();
-        let input = Tensor::from_data(
-            TensorData::new(inputs[..rows * width].to_vec(), [1, rows, width]),
-            &plain,
-        );
-        let actor = match self.runs() {
-            1 => self.actor.valid(),
-            _ => slice(&self.actor.valid(), run),
-        };
-        to_vec(match mode {
+        let input = host_input(inputs, 1, rows, width, &self.devices.plain);
+        to_vec(self.act_tensor(run..run + 1, input, &[rows], mode))
+    }
+
+    /// Actions `[S, rows, act_dim]` of every run for inputs `[S, rows, width]` (row-major),
+    /// run `i` acting for its first `counts[i]` rows ([`crate::algos::Agent::act_runs`]).
+    pub fn act_runs(
+        &mut self,
+        inputs: &[f32],
+        counts: &[usize],
+        rows: usize,
+        width: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let input = host_input(inputs, self.runs(), rows, width, &self.devices.plain);
+        to_vec(self.act_tensor(0..self.runs(), input, counts, mode))
+    }
+
+    /// Actions `[s, rows, A]` of the runs `runs` (the whole stack, or one run) for their inputs
+    /// `[s, rows, width]` on the plain device, run `runs.start + i` sampling for its first
+    /// `counts[i]` rows from its noise stream.
+    pub fn act_tensor(
+        &mut self,
+        runs: std::ops::Range<usize>,
+        input: Tensor<3>,
+        counts: &[usize],
+        mode: ActMode,
+    ) -> Tensor<3> {
+        let actor = select_runs(self.actor.valid(), runs.clone(), self.runs());
+        match mode {
             ActMode::Explore => {
-                let eps =
-                    Noise::stacked_normal(&mut self.noise[run..=run], rows, self.act_dim, &plain);
+                let rows = input.dims()[1];
+                let eps = Noise::stacked_normal_rows(
+                    &mut self.noise[runs],
+                    counts,
+                    rows,
+                    self.act_dim,
+                    &self.devices.plain,
+                );
                 actor.sample(input, eps, &self.scale).action
             }
             ActMode::Deterministic => actor.mode(input, &self.scale),
-        })
+        }
     }
 
     /// Critics (Eq. 3, 5): `y = r + γ(1 − d)(min Q̄(s', a') − α log π(a'|x'))`, `a' ~ π(·|x')`.
-    /// Returns each run's loss. Leaves the actor as it is, so that
+    /// Returns each run's loss `[S]`. Leaves the actor as it is, so that
     /// [`SacLearner::distribution`] may run before or after it.
-    pub fn update_critics(&mut self, batch: &SacBatch) -> Vec<f64> {
+    pub fn update_critics(&mut self, batch: &SacBatch) -> Tensor<1> {
         let alpha = self.temperature.alpha_tensor();
         let next_eps = self.normal(batch.rows());
         let next = self
@@ -353,7 +356,7 @@ impl SacLearner {
             .q2
             .forward(batch.critic_input.clone(), batch.action.clone());
         let losses = critic_loss(q1, q2, y);
-        let values = per_run(losses.clone());
+        let values = losses.clone().inner();
         let grads = GradientsParams::from_grads(losses.sum().backward(), &self.critic);
         self.critic = self
             .critic_opt
@@ -369,13 +372,13 @@ impl SacLearner {
     }
 
     /// [`SacLearner::update_actor_and_temperature`], then the targets. Returns each run's
-    /// actor SAC loss and temperature loss.
+    /// actor SAC loss and temperature loss, `[S]` each.
     pub fn update_policy(
         &mut self,
         batch: &SacBatch,
         distribution: (Tensor<3>, Tensor<3>),
         extra: Option<Tensor<1>>,
-    ) -> (Vec<f64>, Vec<f64>) {
+    ) -> (Tensor<1>, Tensor<1>) {
         let losses = self.update_actor_and_temperature(batch, distribution, extra);
         self.update_targets();
         losses
@@ -383,29 +386,30 @@ impl SacLearner {
 
     /// Actor (Eq. 7): `α log π(a|x) − min Q(s, a)`, `a ~ π(·|x)` from `distribution`, critics
     /// held fixed, plus `extra` (a loss on the same distribution, summed over the runs) in the
-    /// same step; then the temperature. Returns each run's actor SAC loss and temperature loss.
+    /// same step; then the temperature. Returns each run's actor SAC loss and temperature
+    /// loss, `[S]` each.
     pub fn update_actor_and_temperature(
         &mut self,
         batch: &SacBatch,
         distribution: (Tensor<3>, Tensor<3>),
         extra: Option<Tensor<1>>,
-    ) -> (Vec<f64>, Vec<f64>) {
+    ) -> (Tensor<1>, Tensor<1>) {
         let alpha = self.temperature.alpha_tensor();
         let eps = self.normal(batch.rows());
         let pi = squashed_sample(distribution, eps, &self.scale);
-        let mean_log_prob: Vec<f64> = per_run(batch_mean(pi.log_prob.clone().inner()));
+        let mean_log_prob = batch_mean(pi.log_prob.clone().inner());
         let q = self
             .critic
             .valid()
             .min(batch.critic_input.clone(), pi.action);
         let losses = actor_loss(pi.log_prob, q, alpha);
-        let actor_losses = per_run(losses.clone());
+        let actor_losses = losses.clone().inner();
         let loss = losses.sum();
         self.update_actor_by(match extra {
             Some(extra) => loss + extra,
             None => loss,
         });
-        let alpha_losses = self.update_temperature(&mean_log_prob);
+        let alpha_losses = self.update_temperature(mean_log_prob);
         (actor_losses, alpha_losses)
     }
 
@@ -417,18 +421,18 @@ impl SacLearner {
             .step(self.rates.actor, self.actor.clone(), grads);
     }
 
-    /// Temperature (Eq. 18): `−α(log π + H̄)`, toward the target entropy; returns each run's
-    /// loss (0 when α is fixed).
-    fn update_temperature(&mut self, mean_log_prob: &[f64]) -> Vec<f64> {
+    /// Temperature (Eq. 18): `−α(log π + H̄)`, toward the target entropy, from each run's
+    /// mean `log π` `[S]`; returns each run's loss (0 when α is fixed).
+    fn update_temperature(&mut self, mean_log_prob: Tensor<1>) -> Tensor<1> {
         if !self.hyper.autotune_alpha {
-            return vec![0.0; self.runs()];
+            return Tensor::zeros([self.runs()], &self.devices.plain);
         }
         let losses = temperature_loss(
             self.temperature.log_alpha.val(),
             mean_log_prob,
             self.target_entropy,
         );
-        let values = per_run(losses.clone());
+        let values = losses.clone().inner();
         let grads = GradientsParams::from_grads(losses.sum().backward(), &self.temperature);
         self.temperature =
             self.temperature_opt
@@ -441,32 +445,33 @@ impl SacLearner {
         self.target = polyak(self.target.clone(), &self.critic, self.hyper.tau);
     }
 
-    /// One SAC update of every run: critics, actor, temperature, targets.
-    pub fn update(&mut self, batch: &SacBatch) -> Vec<SacStats> {
-        let alphas = self.temperature.alphas();
+    /// One SAC update of every run: critics, actor, temperature, targets; the statistics
+    /// [`SAC_STATS`].
+    pub fn update(&mut self, batch: &SacBatch) -> Stats {
+        let alphas = self.temperature.alpha_values();
         let critic_losses = self.update_critics(batch);
         let distribution = self.distribution(batch);
         let (actor_losses, alpha_losses) = self.update_policy(batch, distribution, None);
-        (0..self.runs())
-            .map(|i| SacStats {
-                critic_loss: critic_losses[i],
-                actor_loss: actor_losses[i],
-                alpha: alphas[i],
-                alpha_loss: alpha_losses[i],
-            })
-            .collect()
+        let mut stats = Stats::new();
+        for (name, values) in
+            SAC_STATS
+                .into_iter()
+                .zip([critic_losses, actor_losses, alphas, alpha_losses])
+        {
+            stats.push(name, values);
+        }
+        stats
     }
 
     /// One update of every run, run `i`'s batch drawn from `contexts[i]`, the runs' batches
-    /// made into one [`SacBatch`] by `batch`; each run's statistics as `train.csv` columns.
+    /// made into one [`SacBatch`] by `batch`.
     pub fn update_runs(
         &mut self,
         contexts: &mut [UpdateContext<'_>],
         batch: impl Fn(&[Transitions], &Device) -> SacBatch,
-    ) -> Result<Vec<Stats>, ReplayError> {
+    ) -> Result<Stats, ReplayError> {
         let batches = UpdateContext::batches(contexts)?;
-        let stats = self.update(&batch(&batches, &self.devices.plain));
-        Ok(stats.iter().map(SacStats::named).collect())
+        Ok(self.update(&batch(&batches, &self.devices.plain)))
     }
 
     /// Saves run `i`'s networks, optimiser states and noise stream as
@@ -502,9 +507,19 @@ impl SacLearner {
     }
 }
 
-/// A `[S]` tensor's values, one per run.
-pub(super) fn per_run(values: Tensor<1>) -> Vec<f64> {
-    to_vec(values.inner()).into_iter().map(f64::from).collect()
+/// `[runs, rows, width]` from the first `runs · rows · width` of `values` (row-major).
+pub(super) fn host_input(
+    values: &[f32],
+    runs: usize,
+    rows: usize,
+    width: usize,
+    device: &Device,
+) -> Tensor<3> {
+    let len = runs * rows * width;
+    upload(
+        TensorData::new(values[..len].to_vec(), [runs, rows, width]),
+        device,
+    )
 }
 
 /// Which part of a transition the SAC baselines condition on.
@@ -540,15 +555,15 @@ impl InputView {
             .collect()
     }
 
-    /// `(input, next input)` of a batch of transitions.
-    fn of_batch(self, batch: &Transitions, spec: &AgentSpec) -> (Vec<f32>, Vec<f32>) {
-        let rows = batch.len();
+    /// `(input, next input)` of the runs' batches, `[S, B, width]` each, from their tensors.
+    fn of_batch(self, t: &TransitionTensors, spec: &AgentSpec) -> (Tensor<3>, Tensor<3>) {
         match self {
-            InputView::TrueState => (batch.state.clone(), batch.next_state.clone()),
-            InputView::LastObservation | InputView::Augmented => (
-                self.from_augmented(&batch.augmented, rows, spec),
-                self.from_augmented(&batch.next_augmented, rows, spec),
+            InputView::TrueState => (t.state.clone(), t.next_state.clone()),
+            InputView::LastObservation => (
+                t.augmented.clone().narrow(2, 0, spec.obs_dim),
+                t.next_augmented.clone().narrow(2, 0, spec.obs_dim),
             ),
+            InputView::Augmented => (t.augmented.clone(), t.next_augmented.clone()),
         }
     }
 }
@@ -594,6 +609,15 @@ impl SacAgent {
         }
     }
 
+    /// What the policy reads of an augmented state when acting.
+    fn acting_view(&self) -> InputView {
+        match self.view {
+            // At Δ = 0 the first obs_dim entries of x_t are s_t.
+            InputView::TrueState => InputView::LastObservation,
+            view => view,
+        }
+    }
+
     /// The runs' batches on `view`.
     fn batch(
         view: InputView,
@@ -601,19 +625,9 @@ impl SacAgent {
         batches: &[Transitions],
         plain: &Device,
     ) -> SacBatch {
-        let (inputs, next_inputs): (Vec<_>, Vec<_>) = batches
-            .iter()
-            .map(|batch| view.of_batch(batch, spec))
-            .unzip();
-        let (input, next_input) = (
-            stacked_rows(inputs.iter().map(Vec::as_slice), batches, plain),
-            stacked_rows(next_inputs.iter().map(Vec::as_slice), batches, plain),
-        );
-        SacBatch::new(
-            &TransitionTensors::stacked(batches, plain),
-            (input.clone(), next_input.clone()),
-            (input, next_input),
-        )
+        let t = TransitionTensors::stacked(batches, plain);
+        let inputs = view.of_batch(&t, spec);
+        SacBatch::new(&t, inputs.clone(), inputs)
     }
 }
 
@@ -630,7 +644,7 @@ impl Agent for SacAgent {
     }
 
     fn stat_names(&self) -> Vec<&'static str> {
-        SacStats::NAMES.to_vec()
+        SAC_STATS.to_vec()
     }
 
     fn runs(&self) -> usize {
@@ -638,20 +652,26 @@ impl Agent for SacAgent {
     }
 
     fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let view = match self.view {
-            // At Δ = 0 the first obs_dim entries of x_t are s_t.
-            InputView::TrueState => InputView::LastObservation,
-            view => view,
-        };
+        let view = self.acting_view();
         let inputs = view.from_augmented(augmented, rows, &self.spec);
         self.learner
             .act_run(run, &inputs, rows, view.width(&self.spec), mode)
     }
 
-    fn update_runs(
+    fn act_runs(
         &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError> {
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let view = self.acting_view();
+        let inputs = view.from_augmented(augmented, self.runs() * rows, &self.spec);
+        let width = view.width(&self.spec);
+        self.learner.act_runs(&inputs, counts, rows, width, mode)
+    }
+
+    fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         let (view, spec) = (self.view, &self.spec);
         self.learner.update_runs(contexts, |batches, plain| {
             SacAgent::batch(view, spec, batches, plain)

@@ -44,15 +44,16 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Stats, check};
+use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, check};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, LearningRates, SacBatch, SacLearner, per_run};
+use super::sac::{Config as SacConfig, LearningRates, SacBatch, SacLearner, host_input};
+use super::stats::Stats;
 use crate::acting::{ActingNetwork, BeliefTransformer, TransformerBlock};
 use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, StackedLayerNorm,
     StackedLinear, TransitionTensors, adam, load_json_stack, load_optimizer_stack, load_stack,
-    slice, stack, stacked_rows, to_vec,
+    select_runs, stack, stacked_rows, to_vec, upload,
 };
 use crate::seeds;
 
@@ -91,6 +92,7 @@ impl AlgoConfig for Config {
     const INFO: AlgoInfo = AlgoInfo {
         delay_free_policy: true,
         delayed_only: true,
+        cpu_runs_per_pass: 1,
         ..AlgoInfo::single_learner(
             "vdpo",
             "VDPO",
@@ -472,7 +474,7 @@ impl DropoutMasks {
         let shape = x.shape();
         let per_run = shape.num_elements() / runs.len();
         let mask: Vec<f32> = runs.iter_mut().flat_map(|run| run.mask(per_run)).collect();
-        let mask = Tensor::from_data(TensorData::new(mask, shape), &x.device());
+        let mask = upload(TensorData::new(mask, shape), &x.device());
         x * mask
     }
 
@@ -610,37 +612,58 @@ impl Vdpo {
         }
     }
 
-    /// One update of the reference SAC on the true `(s, a, r, s')`; returns each run's
-    /// statistics.
-    fn update_reference(&mut self, batch: &SacBatch, updates_before: u64) -> Vec<Stats> {
-        let alphas = self.reference.temperature.alphas();
-        let critic_losses = self.reference.update_critics(batch);
-        let actor_losses = ((updates_before + 1) % self.actor_every == 0).then(|| {
-            let mut sums = vec![0.0; self.seeds.len()];
-            for _ in 0..self.actor_every {
-                let distribution = self.reference.distribution(batch);
-                let (losses, _) =
-                    self.reference
-                        .update_actor_and_temperature(batch, distribution, None);
-                sums.iter_mut()
-                    .zip(losses)
-                    .for_each(|(sum, loss)| *sum += loss);
+    /// Actions of the runs `runs` (the whole stack, or one run) for their augmented states
+    /// `[s, rows, aug]`: the policy head on the belief's features at the newest position, run
+    /// `runs.start + i` sampling for its first `counts[i]` rows from its exploration stream.
+    fn act_tensor(
+        &mut self,
+        runs: std::ops::Range<usize>,
+        augmented: Tensor<3>,
+        counts: &[usize],
+        mode: ActMode,
+    ) -> Tensor<3> {
+        let stack = self.runs();
+        let belief = select_runs(self.belief.valid(), runs.clone(), stack);
+        let head = select_runs(self.policy_head.valid(), runs.clone(), stack);
+        let rows = augmented.dims()[1];
+        let h = belief.last_features(augmented, &self.spec);
+        match mode {
+            ActMode::Explore => {
+                let eps = Noise::stacked_normal_rows(
+                    self.schedules[runs].iter_mut().map(|s| &mut s.noise),
+                    counts,
+                    rows,
+                    self.spec.act_dim,
+                    &self.devices.plain,
+                );
+                head.sample(h, eps, &self.scale).action
             }
-            sums
-        });
+            ActMode::Deterministic => head.mode(h, &self.scale),
+        }
+    }
+
+    /// One update of the reference SAC on the true `(s, a, r, s')`; returns its statistics.
+    fn update_reference(&mut self, batch: &SacBatch, updates_before: u64) -> Stats {
+        let mut stats = Stats::new();
+        stats.push(
+            REFERENCE_STATS[2],
+            self.reference.temperature.alpha_values(),
+        );
+        stats.push(REFERENCE_STATS[0], self.reference.update_critics(batch));
+        if (updates_before + 1) % self.actor_every == 0 {
+            let losses = (0..self.actor_every)
+                .map(|_| {
+                    let distribution = self.reference.distribution(batch);
+                    let (losses, _) =
+                        self.reference
+                            .update_actor_and_temperature(batch, distribution, None);
+                    losses
+                })
+                .collect();
+            stats.push_mean(REFERENCE_STATS[1], losses);
+        }
         self.reference.update_targets();
-        (0..self.seeds.len())
-            .map(|run| {
-                let mut stats: Stats = vec![
-                    (REFERENCE_STATS[0], critic_losses[run]),
-                    (REFERENCE_STATS[2], alphas[run]),
-                ];
-                if let Some(sums) = &actor_losses {
-                    stats.push((REFERENCE_STATS[1], sums[run] / self.actor_every as f64));
-                }
-                stats
-            })
-            .collect()
+        stats
     }
 
     /// One step of the belief network on the runs' reconstruction losses (summed); returns
@@ -651,7 +674,7 @@ impl Vdpo {
         augmented: Tensor<3>,
         truth: Tensor<4>,
         updates_before: u64,
-    ) -> Vec<f64> {
+    ) -> Tensor<1> {
         let mut masks: Vec<DropoutMasks> = self
             .seeds
             .iter()
@@ -664,7 +687,7 @@ impl Vdpo {
             .belief
             .features(augmented, &self.spec, Some(&mut masks));
         let losses = reconstruction_loss(self.belief.reconstruct(features), truth);
-        let values = per_run(losses.clone());
+        let values = losses.clone().inner();
         let grads = GradientsParams::from_grads(losses.sum().backward(), &self.belief);
         self.belief = self
             .belief_opt
@@ -673,16 +696,16 @@ impl Vdpo {
     }
 
     /// The cloning stage: `bc_updates` steps of the policy heads, each run on fresh batches of
-    /// its own, the transformer held fixed; returns each run's mean KL, and the steps taken.
+    /// its own, the transformer held fixed; returns each run's KL `[S]` at each step.
     fn clone_reference(
         &mut self,
         contexts: &mut [UpdateContext<'_>],
-    ) -> Result<(Vec<f64>, u64), ReplayError> {
+    ) -> Result<Vec<Tensor<1>>, ReplayError> {
         let (runs, obs, delay) = (self.seeds.len(), self.spec.obs_dim, self.spec.delay);
         let plain = self.devices.plain.clone();
         let (belief, reference) = (self.belief.valid(), self.reference.actor.valid());
-        let (mut kl_sums, mut steps) = (vec![0.0; runs], 0u64);
-        while steps < self.bc_updates {
+        let mut kls = Vec::new();
+        while (kls.len() as u64) < self.bc_updates {
             let batches = UpdateContext::batches(contexts)?;
             let n = batches[0].len();
             let augmented = stacked_rows(
@@ -703,20 +726,13 @@ impl Vdpo {
                 self.policy_head.distribution(features),
                 reference.distribution(targets),
             );
-            kl_sums
-                .iter_mut()
-                .zip(per_run(losses.clone()))
-                .for_each(|(sum, kl)| *sum += kl);
+            kls.push(losses.clone().inner());
             let grads = GradientsParams::from_grads(losses.sum().backward(), &self.policy_head);
             self.policy_head =
                 self.policy_head_opt
                     .step(self.bc_learning_rate, self.policy_head.clone(), grads);
-            steps += 1;
         }
-        Ok((
-            kl_sums.iter().map(|sum| sum / steps as f64).collect(),
-            steps,
-        ))
+        Ok(kls)
     }
 }
 
@@ -727,27 +743,20 @@ impl Agent for Vdpo {
 
     fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         let width = self.spec.augmented_dim();
-        let plain = self.devices.plain.clone();
-        let x = Tensor::from_data(
-            TensorData::new(augmented[..rows * width].to_vec(), [1, rows, width]),
-            &plain,
-        );
-        let (belief, head) = match self.runs() {
-            1 => (self.belief.valid(), self.policy_head.valid()),
-            _ => (
-                slice(&self.belief.valid(), run),
-                slice(&self.policy_head.valid(), run),
-            ),
-        };
-        let h = belief.last_features(x, &self.spec);
-        to_vec(match mode {
-            ActMode::Explore => {
-                let noise = std::slice::from_mut(&mut self.schedules[run].noise);
-                let eps = Noise::stacked_normal(noise, rows, self.spec.act_dim, &plain);
-                head.sample(h, eps, &self.scale).action
-            }
-            ActMode::Deterministic => head.mode(h, &self.scale),
-        })
+        let x = host_input(augmented, 1, rows, width, &self.devices.plain);
+        to_vec(self.act_tensor(run..run + 1, x, &[rows], mode))
+    }
+
+    fn act_runs(
+        &mut self,
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let (runs, width) = (self.runs(), self.spec.augmented_dim());
+        let x = host_input(augmented, runs, rows, width, &self.devices.plain);
+        to_vec(self.act_tensor(0..runs, x, counts, mode))
     }
 
     fn acting_network(&self) -> ActingNetwork {
@@ -779,10 +788,7 @@ impl Agent for Vdpo {
         }
     }
 
-    fn update_runs(
-        &mut self,
-        contexts: &mut [UpdateContext<'_>],
-    ) -> Result<Vec<Stats>, ReplayError> {
+    fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         // The runs of a stack step together: their counters are the same.
         let (updates, env_steps) = (contexts[0].updates, contexts[0].env_steps);
         let batches = UpdateContext::batches(contexts)?;
@@ -803,9 +809,7 @@ impl Agent for Vdpo {
         )
         .reshape([runs, n, self.spec.delay, self.spec.obs_dim]);
         let losses = self.update_belief(t.augmented, truth, updates);
-        for (stats, loss) in stats.iter_mut().zip(losses) {
-            stats.push((RECONSTRUCTION_STAT, loss));
-        }
+        stats.push(RECONSTRUCTION_STAT, losses);
 
         // 3. The cloning stage, on its schedule.
         let due = self.schedules[0]
@@ -815,10 +819,10 @@ impl Agent for Vdpo {
             schedule.last_env_steps = Some(env_steps);
         }
         if due {
-            let (kls, steps) = self.clone_reference(contexts)?;
-            for (stats, kl) in stats.iter_mut().zip(kls) {
-                stats.extend([(BC_STATS[0], kl), (BC_STATS[1], steps as f64)]);
-            }
+            let kls = self.clone_reference(contexts)?;
+            let steps = Tensor::full([runs], kls.len() as f32, &plain);
+            stats.push_mean(BC_STATS[0], kls);
+            stats.push(BC_STATS[1], steps);
         }
         Ok(stats)
     }
@@ -991,11 +995,11 @@ mod tests {
         let backward = f64::from(to_vec(gaussian_kl(reference, head))[0]);
         let gap = (forward - backward).abs();
         assert!(gap > 1e-4 * forward.abs(), "{forward} {backward}");
-        let (kls, steps) = agent
+        let kls = agent
             .clone_reference(&mut [UpdateContext::fixed(&batch, 0, 0)])
             .unwrap();
-        let kl = kls[0];
-        assert_eq!(steps, 1);
+        assert_eq!(kls.len(), 1, "one step");
+        let kl = f64::from(to_vec(kls[0].clone())[0]);
         assert!(
             (kl - forward).abs() < gap / 100.0,
             "{kl}: KL(head ‖ reference) {forward}, KL(reference ‖ head) {backward}"
@@ -1130,7 +1134,9 @@ mod tests {
                 let before = head(&agent);
                 let stats = agent
                     .update(&mut UpdateContext::fixed(&batch, env_steps, updates as u64))
-                    .unwrap();
+                    .unwrap()
+                    .values()
+                    .remove(0);
                 let moved = head(&agent) != before;
                 match stats.iter().find(|(name, _)| *name == BC_STATS[1]) {
                     Some(&(_, steps)) => {

@@ -88,24 +88,45 @@ impl DelayedBatch {
     where
         E: From<DelayError>,
     {
-        let (aug, act) = (self.layout().augmented_dim(), self.layout().act_dim);
+        let (copies, inputs) = self.acting_states(acting);
+        let chosen = match copies.is_empty() {
+            true => Vec::new(),
+            false => policy(&inputs, copies.len())?,
+        };
+        self.set_actions(actions, &copies, &chosen)?;
+        Ok(())
+    }
+
+    /// The ready copies that `acting` selects (those whose augmented state exists), and their
+    /// augmented states `[copies, obs + Δ·act]`: what a policy chooses for.
+    pub fn acting_states(&self, acting: impl Fn(usize) -> bool) -> (Vec<usize>, Vec<f32>) {
+        let aug = self.layout().augmented_dim();
         let (ready, augmented) = (self.layer.ready(), self.layer.augmented());
-        let rows: Vec<usize> = (0..ready.len())
+        let copies: Vec<usize> = (0..ready.len())
             .filter(|&i| ready[i] == 1 && acting(i))
             .collect();
-        if !rows.is_empty() {
-            let inputs: Vec<f32> = rows
-                .iter()
-                .flat_map(|&i| &augmented[i * aug..(i + 1) * aug])
-                .copied()
-                .collect();
-            let chosen = policy(&inputs, rows.len())?;
-            for (k, &i) in rows.iter().enumerate() {
-                actions[i * act..(i + 1) * act].copy_from_slice(&chosen[k * act..(k + 1) * act]);
-            }
+        let inputs = copies
+            .iter()
+            .flat_map(|&i| &augmented[i * aug..(i + 1) * aug])
+            .copied()
+            .collect();
+        (copies, inputs)
+    }
+
+    /// Writes `chosen` (`[copies, act_dim]`, a policy's actions for the copies that
+    /// [`DelayedBatch::acting_states`] named) into `actions` (`[N, act_dim]`), and warm-up
+    /// actions into the rows of copies still in warm-up.
+    pub fn set_actions(
+        &mut self,
+        actions: &mut [f32],
+        copies: &[usize],
+        chosen: &[f32],
+    ) -> Result<(), DelayError> {
+        let act = self.layout().act_dim;
+        for (k, &i) in copies.iter().enumerate() {
+            actions[i * act..(i + 1) * act].copy_from_slice(&chosen[k * act..(k + 1) * act]);
         }
-        self.layer.fill_warmup(actions)?;
-        Ok(())
+        self.layer.fill_warmup(actions)
     }
 
     /// Steps the simulator with `actions`, then the delay layer with what it returned.

@@ -60,19 +60,15 @@ pub fn actor_loss(log_prob: Tensor<3>, q_min: Tensor<3>, alpha: Tensor<3>) -> Te
 }
 
 /// `J(α) = E[−α·(log π(a|s) + H̄)]` with `α = exp(log α)` and the log-probabilities held
-/// fixed (Eq. 18), per run `[S]`: `log_alpha` `[S, 1]`, `mean_log_prob` each run's batch mean.
+/// fixed (Eq. 18), per run `[S]`: `log_alpha` `[S, 1]`, `mean_log_prob` each run's batch mean
+/// `[S]`.
 pub fn temperature_loss(
     log_alpha: Tensor<2>,
-    mean_log_prob: &[f64],
+    mean_log_prob: Tensor<1>,
     target_entropy: f64,
 ) -> Tensor<1> {
-    let coefficients: Vec<f32> = mean_log_prob
-        .iter()
-        .map(|m| -(m + target_entropy) as f32)
-        .collect();
-    let rows = coefficients.len();
-    let coefficients = super::tensors::matrix(coefficients, rows, 1, &log_alpha.device());
-    (log_alpha.exp() * coefficients).reshape([-1])
+    let coefficients = mean_log_prob.inner().add_scalar(target_entropy).neg();
+    (log_alpha.exp() * coefficients.unsqueeze_dim(1)).reshape([-1])
 }
 
 /// Polyak averaging `θ̄ ← τ·θ + (1 − τ)·θ̄` of every parameter of `target` toward `online`.

@@ -24,10 +24,12 @@ pub use nets::{
     QNetwork, Temperature, TwinQ, adam, squashed_sample, squashed_samples_k,
 };
 pub use noise::Noise;
-pub use stack::{StackedLayerNorm, StackedLinear, slice, slice_pack, stack, stack_packs};
+pub use stack::{
+    StackedLayerNorm, StackedLinear, select_runs, slice, slice_pack, stack, stack_packs,
+};
 #[cfg(test)]
 pub(crate) use tensors::assert_close;
-pub use tensors::{TransitionTensors, matrix, stacked_rows, to_vec};
+pub use tensors::{Transfers, TransitionTensors, matrix, stacked_rows, to_vec, transfers, upload};
 
 /// What can go wrong while learning, saving or loading.
 #[derive(Debug, thiserror::Error)]

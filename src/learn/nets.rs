@@ -225,9 +225,14 @@ impl Temperature {
         self.log_alpha.val().inner().exp().unsqueeze_dim(2)
     }
 
-    /// The current α of each run.
+    /// The current α of each run, `[S]`, off the graph.
+    pub fn alpha_values(&self) -> Tensor<1> {
+        self.log_alpha.val().inner().exp().reshape([-1])
+    }
+
+    /// The current α of each run, downloaded.
     pub fn alphas(&self) -> Vec<f64> {
-        to_vec(self.log_alpha.val().inner().exp())
+        to_vec(self.alpha_values())
             .into_iter()
             .map(f64::from)
             .collect()

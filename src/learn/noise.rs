@@ -1,10 +1,12 @@
 //! Standard normal noise drawn on the host from a seeded stream, so that a run's randomness
 //! is reproducible, independent of the backend, and saved in checkpoints.
-use burn::prelude::{Device, Tensor};
+use burn::prelude::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
+
+use super::tensors::upload;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Noise {
@@ -38,14 +40,27 @@ impl Noise {
         cols: usize,
         device: &Device,
     ) -> Tensor<3> {
-        let values: Vec<f32> = streams
-            .iter_mut()
-            .flat_map(|stream| stream.normal_values(rows * cols))
-            .collect();
-        Tensor::from_data(
-            burn::prelude::TensorData::new(values, [streams.len(), rows, cols]),
-            device,
-        )
+        let counts = vec![rows; streams.len()];
+        Noise::stacked_normal_rows(streams.iter_mut(), &counts, rows, cols, device)
+    }
+
+    /// [`Noise::stacked_normal`] where run `i` draws its first `counts[i]` rows only (the rows
+    /// it acts for) from the i-th of `streams` and the rest of its slice is zeros.
+    pub fn stacked_normal_rows<'a>(
+        streams: impl IntoIterator<Item = &'a mut Noise>,
+        counts: &[usize],
+        rows: usize,
+        cols: usize,
+        device: &Device,
+    ) -> Tensor<3> {
+        let block = rows * cols;
+        let mut values = vec![0.0f32; counts.len() * block];
+        for (i, (stream, &count)) in streams.into_iter().zip(counts).enumerate() {
+            let start = i * block;
+            values[start..start + count * cols]
+                .copy_from_slice(&stream.normal_values(count * cols));
+        }
+        upload(TensorData::new(values, [counts.len(), rows, cols]), device)
     }
 
     /// A `[k, S, rows, cols]` tensor: run `i`'s K samples of `[rows, cols]` draws from
@@ -71,8 +86,8 @@ impl Noise {
             })
             .copied()
             .collect();
-        Tensor::from_data(
-            burn::prelude::TensorData::new(values, [k, streams.len(), rows, cols]),
+        upload(
+            TensorData::new(values, [k, streams.len(), rows, cols]),
             device,
         )
     }

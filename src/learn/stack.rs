@@ -182,6 +182,18 @@ pub fn slice<M: Module>(module: &M, run: usize) -> M {
     module.clone().map(&mut Cut(run))
 }
 
+/// `module` for the runs `runs` of its stack of `stack`: the whole of it, or the one run
+/// `runs.start` ([`slice`]).
+pub fn select_runs<M: Module>(module: M, runs: std::ops::Range<usize>, stack: usize) -> M {
+    match runs.len() == stack {
+        true => module,
+        false => {
+            debug_assert_eq!(runs.len(), 1, "the whole stack or one run");
+            slice(&module, runs.start)
+        }
+    }
+}
+
 /// Something wrong in a stacked record.
 fn record_error(message: impl std::fmt::Display) -> String {
     message.to_string()

@@ -1,11 +1,49 @@
-//! Host arrays in and out of tensors.
+//! Host arrays in and out of tensors. Every crossing a learner makes between the host and its
+//! device goes through [`upload`] or [`to_vec`], which count them ([`transfers`]): on a GPU
+//! each is a transfer and a synchronisation, so what an update moves is tested, not assumed.
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use burn::prelude::{Device, Tensor, TensorData};
 
 use crate::delay::Transitions;
 
+static UPLOADS: AtomicU64 = AtomicU64::new(0);
+static DOWNLOADS: AtomicU64 = AtomicU64::new(0);
+
+/// Uploads and downloads made through this module since the process started, by every thread.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Transfers {
+    pub uploads: u64,
+    pub downloads: u64,
+}
+
+impl std::ops::Sub for Transfers {
+    type Output = Transfers;
+    fn sub(self, before: Transfers) -> Transfers {
+        Transfers {
+            uploads: self.uploads - before.uploads,
+            downloads: self.downloads - before.downloads,
+        }
+    }
+}
+
+/// The count so far.
+pub fn transfers() -> Transfers {
+    Transfers {
+        uploads: UPLOADS.load(Ordering::Relaxed),
+        downloads: DOWNLOADS.load(Ordering::Relaxed),
+    }
+}
+
+/// `data` as a tensor on `device`: one upload.
+pub fn upload<const D: usize>(data: TensorData, device: &Device) -> Tensor<D> {
+    UPLOADS.fetch_add(1, Ordering::Relaxed);
+    Tensor::from_data(data, device)
+}
+
 /// A `[rows, cols]` tensor from row-major values.
 pub fn matrix(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
-    Tensor::from_data(TensorData::new(values, [rows, cols]), device)
+    upload(TensorData::new(values, [rows, cols]), device)
 }
 
 /// The batches of a stack's runs as `[S, B, ·]` tensors (a solo run's `[1, B, ·]`), one upload
@@ -63,11 +101,12 @@ pub fn stacked_rows<'a>(
     let values: Vec<f32> = runs.flat_map(|run| run.iter().copied()).collect();
     let (stack, rows) = (batches.len(), batches[0].len());
     let width = values.len() / (stack * rows).max(1);
-    Tensor::from_data(TensorData::new(values, [stack, rows, width]), device)
+    upload(TensorData::new(values, [stack, rows, width]), device)
 }
 
-/// The values of a tensor, row-major.
+/// The values of a tensor, row-major: one download.
 pub fn to_vec<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
+    DOWNLOADS.fetch_add(1, Ordering::Relaxed);
     tensor
         .into_data()
         .convert::<f32>()

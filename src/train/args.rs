@@ -83,8 +83,8 @@ pub struct TrainArgs {
     /// Where the learners run.
     #[arg(long, value_enum)]
     pub device: Option<LearnDevice>,
-    /// With --seeds: runs per learner pass (0: 2 on the CPU, all on a GPU); the same numbers
-    /// whatever it is.
+    /// With --seeds: runs per learner pass (0: on the CPU 2, VDPO 1; all on a GPU); the same
+    /// numbers whatever it is.
     #[arg(long, value_name = "N")]
     pub runs_per_pass: Option<usize>,
     /// Where the delay layer runs: cpu (the reference), or gpu (the WGSL kernels on any

@@ -43,9 +43,10 @@ pub struct TrainConfig {
     /// Where the learners run.
     pub device: LearnDevice,
     /// In a stack (`dhrl train --seeds`), the runs one learner pass serves; the stack's runs
-    /// go through in passes of this many. 0: the device's default, 2 on the CPU (more runs per
-    /// pass outgrow the caches: docs/results/stacking.md) and all of them on a GPU. The
-    /// numbers are the same whatever it is.
+    /// go through in passes of this many. 0: the device's default, on the CPU the algorithm's
+    /// ([`crate::algos::AlgoInfo::cpu_runs_per_pass`], 2 but for VDPO's 1: more runs per pass
+    /// outgrow the caches, docs/results/stacking.md) and all of them on a GPU. The numbers are
+    /// the same whatever it is.
     pub runs_per_pass: usize,
     /// Where the delay layer runs (training and evaluation copies).
     pub delay_device: DelayDevice,
@@ -84,7 +85,7 @@ impl TrainConfig {
     /// The runs one learner pass serves ([`TrainConfig::runs_per_pass`], 0 resolved).
     pub fn runs_per_learner_pass(&self) -> usize {
         match (self.runs_per_pass, self.device) {
-            (0, LearnDevice::Cpu) => 2,
+            (0, LearnDevice::Cpu) => self.algo.info().cpu_runs_per_pass,
             (0, LearnDevice::Wgpu) => usize::MAX,
             (runs, _) => runs,
         }

@@ -13,7 +13,7 @@ use super::eval::{EvalPolicy, EvalResult, evaluate};
 use super::logs::{CsvLog, stat_means, truncate_after};
 use super::tensorboard::{self, EventLog};
 use super::{ConfigError, TrainConfig, TrainError, io_error};
-use crate::algos::{ActMode, Agent, AgentSpec, UpdateContext};
+use crate::algos::{ActMode, Agent, AgentSpec, Stats, UpdateContext};
 use crate::delay::{DelayArgs, DelayConfig, DelayedBatch, ReplayError, ReplayStore};
 use crate::learn::Devices;
 use crate::progress::Progress;
@@ -86,6 +86,14 @@ const TRAIN_HEADER: [&str; 6] = [
     "diverged_episodes",
 ];
 
+/// One update whose statistics are still on the device.
+struct PendingUpdate {
+    stats: Stats,
+    /// Per run: its update count and environment steps at this update; `None` for a run that
+    /// had already stopped.
+    counters: Vec<Option<(u64, u64)>>,
+}
+
 /// One run of a stack: its copies and delay layer, replay, counters, logs and folder.
 struct RunSlot {
     config: TrainConfig,
@@ -115,6 +123,9 @@ struct Trainer {
     /// The threads the agent's learners run on (its declared learner count).
     learner_pool: rayon::ThreadPool,
     stat_names: Vec<&'static str>,
+    /// The updates whose statistics are still on the learner's device: downloaded together
+    /// when a `train.csv` row is due, and before every evaluation and checkpoint.
+    pending: Vec<PendingUpdate>,
     /// What `dhrl train --resume` takes to continue: the run, or the stack's folder.
     resume_target: PathBuf,
 }
@@ -488,6 +499,20 @@ impl RunSlot {
     }
 
     /// Stops the run alone: its error goes to `RUN/failed.txt` and to its result.
+    /// Stops this run for `error`: the whole training when it is `solo`, else the run alone
+    /// ([`RunSlot::fail`]) while the rest of its stack goes on.
+    fn stop(&mut self, error: TrainError, solo: bool) -> Result<(), TrainError> {
+        if solo {
+            return Err(error);
+        }
+        eprintln!(
+            "{}: stopped alone, the rest of its stack goes on: {error}",
+            self.run.display()
+        );
+        self.fail(error);
+        Ok(())
+    }
+
     fn fail(&mut self, error: TrainError) {
         let path = self.run.join(FAILED);
         let _ = crate::files::write_atomically(&path, format!("{error}\n"));
@@ -622,6 +647,7 @@ impl Trainer {
             agent,
             learner_pool: learner_pool(first.algo.info().learner_threads)?,
             stat_names,
+            pending: Vec::new(),
             resume_target: resume_target.to_path_buf(),
         })
     }
@@ -688,40 +714,83 @@ impl Trainer {
         checkpoint::commit_all(&committed)
     }
 
-    /// Actions for every copy of run `i`: uniform random during the warm-up phase, the
-    /// policy's samples for copies whose augmented state exists, the delay layer's warm-up
-    /// actions for the rest.
-    fn choose_actions(&mut self, i: usize) -> Result<Vec<f32>, TrainError> {
-        let slot = &mut self.slots[i];
-        let env = slot.batch.env();
-        let (n, act) = (env.len(), env.act_dim());
-        let mut actions = vec![0.0f32; n * act];
-        let warming_up = slot.state.env_steps < slot.config.warmup_steps;
-        if warming_up {
-            let (low, high) = env.action_bounds();
-            for row in actions.chunks_mut(act) {
-                for (j, a) in row.iter_mut().enumerate() {
-                    *a = slot
-                        .state
-                        .warmup_rng
-                        .random_range(low[j] as f32..=high[j] as f32);
+    /// Actions for every copy of every active run: uniform random during the warm-up phase,
+    /// the policy's samples for copies whose augmented state exists (every run's in one pass
+    /// of the agent), the delay layer's warm-up actions for the rest.
+    fn choose_actions(&mut self) -> Result<Vec<Vec<f32>>, TrainError> {
+        let env = self.slots[0].batch.env();
+        let (copies, act, aug) = (
+            env.len(),
+            env.act_dim(),
+            self.slots[0].batch.layout().augmented_dim(),
+        );
+        let runs = self.slots.len();
+        let mut actions = vec![vec![0.0f32; copies * act]; runs];
+        let mut acting = vec![Vec::new(); runs];
+        let mut augmented = vec![0.0f32; runs * copies * aug];
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            if !slot.active() {
+                continue;
+            }
+            if slot.state.env_steps < slot.config.warmup_steps {
+                let (low, high) = slot.batch.env().action_bounds();
+                for row in actions[i].chunks_mut(act) {
+                    for (j, a) in row.iter_mut().enumerate() {
+                        *a = slot
+                            .state
+                            .warmup_rng
+                            .random_range(low[j] as f32..=high[j] as f32);
+                    }
+                }
+                continue;
+            }
+            let (ready, states) = slot.batch.acting_states(|_| true);
+            let start = i * copies * aug;
+            augmented[start..start + states.len()].copy_from_slice(&states);
+            acting[i] = ready;
+        }
+        let counts: Vec<usize> = acting.iter().map(Vec::len).collect();
+        let chosen = match counts.iter().any(|&count| count > 0) {
+            true => {
+                let agent = &mut self.agent;
+                self.learner_pool
+                    .install(|| agent.act_runs(&augmented, &counts, copies, ActMode::Explore))
+            }
+            false => Vec::new(),
+        };
+        let chosen_by = |i: usize| match counts[i] {
+            0 => &[][..],
+            count => &chosen[i * copies * act..(i * copies + count) * act],
+        };
+        if (0..runs).any(|i| chosen_by(i).iter().any(|a| !a.is_finite())) {
+            // A policy gone non-finite: the statistics say at which update it happened.
+            self.take_statistics()?;
+            let solo = runs == 1;
+            for (i, slot) in self.slots.iter_mut().enumerate() {
+                let bad = chosen_by(i).iter().find(|a| !a.is_finite());
+                if let (true, Some(&value)) = (slot.active(), bad) {
+                    let error = TrainError::NonFinite {
+                        run: slot.run.display().to_string(),
+                        statistic: "action",
+                        value: f64::from(value),
+                        update: slot.state.updates,
+                        env_steps: slot.state.env_steps,
+                    };
+                    slot.stop(error, solo)?;
                 }
             }
         }
-        let (agent, pool) = (&mut self.agent, &self.learner_pool);
-        slot.batch.choose_actions(
-            &mut actions,
-            |_| !warming_up,
-            |inputs, rows| {
-                Ok::<_, TrainError>(
-                    pool.install(|| agent.act_run(i, inputs, rows, ActMode::Explore)),
-                )
-            },
-        )?;
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            if slot.active() {
+                slot.batch
+                    .set_actions(&mut actions[i], &acting[i], chosen_by(i))?;
+            }
+        }
         Ok(actions)
     }
 
-    /// One update of every run: each draws its batch from its own replay and stream.
+    /// One update of every run: each draws its batch from its own replay and stream. Its
+    /// statistics stay on the device until a `train.csv` row is due.
     fn update(&mut self) -> Result<(), TrainError> {
         let extras = self.agent.batch_extras();
         let mut contexts: Vec<UpdateContext<'_>> = self
@@ -750,41 +819,69 @@ impl Trainer {
             Err(e) => return Err(e.into()),
         };
         drop(contexts);
-        let solo = self.slots.len() == 1;
-        for (slot, stats) in self.slots.iter_mut().zip(stats) {
-            if !slot.active() {
-                continue;
-            }
-            slot.state.updates += 1;
-            if let Some((name, value)) = stats.iter().find(|(_, v)| !v.is_finite()) {
-                let error = TrainError::NonFinite {
-                    run: slot.run.display().to_string(),
-                    statistic: name,
-                    value: *value,
-                    update: slot.state.updates,
-                    env_steps: slot.state.env_steps,
-                };
-                if solo {
-                    return Err(error);
+        let mut row_due = false;
+        let counters = self
+            .slots
+            .iter_mut()
+            .map(|slot| {
+                slot.active().then(|| {
+                    slot.state.updates += 1;
+                    row_due |= slot.state.updates % slot.config.log_every == 0;
+                    (slot.state.updates, slot.state.env_steps)
+                })
+            })
+            .collect();
+        self.pending.push(PendingUpdate { stats, counters });
+        if row_due {
+            self.take_statistics()?;
+            for slot in &mut self.slots {
+                if slot.active() && slot.state.updates % slot.config.log_every == 0 {
+                    slot.write_train_row(&self.stat_names)?;
                 }
-                eprintln!(
-                    "{}: stopped alone, the rest of its stack goes on: {error}",
-                    slot.run.display()
-                );
-                slot.fail(error);
-                continue;
             }
-            for (name, value) in stats {
-                let k = self
-                    .stat_names
-                    .iter()
-                    .position(|n| *n == name)
-                    .ok_or(TrainError::UndeclaredStatistic(name))?;
-                slot.state.stat_sums[k] += value;
-                slot.state.stat_counts[k] += 1;
-            }
-            if slot.state.updates % slot.config.log_every == 0 {
-                slot.write_train_row(&self.stat_names)?;
+        }
+        Ok(())
+    }
+
+    /// Downloads the statistics of the pending updates (one transfer) into each run's sums
+    /// for its next `train.csv` row. A run with a non-finite one stops there, with the update
+    /// it came from: alone in a stack, the whole training when it is solo.
+    fn take_statistics(&mut self) -> Result<(), TrainError> {
+        if self.pending.is_empty() {
+            return Ok(());
+        }
+        let pending = std::mem::take(&mut self.pending);
+        let stats: Vec<Stats> = pending.iter().map(|update| update.stats.clone()).collect();
+        let values = Stats::download(&stats);
+        let solo = self.slots.len() == 1;
+        for (update, runs) in pending.iter().zip(values) {
+            for ((slot, counters), stats) in self.slots.iter_mut().zip(&update.counters).zip(runs) {
+                let Some((updates, env_steps)) = *counters else {
+                    continue;
+                };
+                if !slot.active() {
+                    continue;
+                }
+                if let Some((name, value)) = stats.iter().find(|(_, v)| !v.is_finite()) {
+                    let error = TrainError::NonFinite {
+                        run: slot.run.display().to_string(),
+                        statistic: name,
+                        value: *value,
+                        update: updates,
+                        env_steps,
+                    };
+                    slot.stop(error, solo)?;
+                    continue;
+                }
+                for (name, value) in stats {
+                    let k = self
+                        .stat_names
+                        .iter()
+                        .position(|n| *n == name)
+                        .ok_or(TrainError::UndeclaredStatistic(name))?;
+                    slot.state.stat_sums[k] += value;
+                    slot.state.stat_counts[k] += 1;
+                }
             }
         }
         Ok(())
@@ -833,12 +930,11 @@ impl Trainer {
             }
         };
         while self.slots[0].state.env_steps < c.steps && self.slots.iter().any(RunSlot::active) {
-            for i in 0..self.slots.len() {
-                if !self.slots[i].active() {
+            let actions = self.choose_actions()?;
+            for (slot, actions) in self.slots.iter_mut().zip(actions) {
+                if !slot.active() {
                     continue;
                 }
-                let actions = self.choose_actions(i)?;
-                let slot = &mut self.slots[i];
                 slot.batch.step(&actions)?;
                 let count = slot.replay.push_step(&slot.batch)?;
                 if count > 0 {
@@ -874,7 +970,11 @@ impl Trainer {
                 }
             }
             set_walls(&mut self.slots);
-            if env_steps / c.eval_every > self.slots[0].state.evals_done || env_steps >= c.steps {
+            let finished = env_steps >= c.steps;
+            // A run whose statistics turned non-finite stops before it is evaluated or saved:
+            // the pending ones are taken first.
+            if env_steps / c.eval_every > self.slots[0].state.evals_done || finished {
+                self.take_statistics()?;
                 let mut message = Vec::new();
                 for i in 0..self.slots.len() {
                     if !self.slots[i].active() {
@@ -891,9 +991,9 @@ impl Trainer {
                 }
                 bar.set_message(format!("eval {}", message.join(", ")));
             }
-            let finished = env_steps >= c.steps;
             let scheduled = env_steps / c.checkpoint_every > self.slots[0].state.checkpoints_done;
             if scheduled || finished || stop_requested() {
+                self.take_statistics()?;
                 for slot in &mut self.slots {
                     slot.state.checkpoints_done = env_steps / c.checkpoint_every;
                 }

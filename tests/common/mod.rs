@@ -8,7 +8,7 @@ use std::process::Command;
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::prelude::Tensor;
-use dhrl::algos::{Agent, AgentSpec, Stats, UpdateContext};
+use dhrl::algos::{Agent, AgentSpec, RunStats, UpdateContext};
 use dhrl::delay::Transitions;
 use dhrl::learn::to_vec;
 
@@ -37,11 +37,13 @@ pub fn small_spec(delay: usize) -> AgentSpec {
     }
 }
 
-/// One update of `agent` from exactly `batch`.
-pub fn update(agent: &mut dyn Agent, batch: &Transitions) -> Stats {
+/// One update of `agent` (a solo run) from exactly `batch`: its statistics, downloaded.
+pub fn update(agent: &mut dyn Agent, batch: &Transitions) -> RunStats {
     agent
         .update(&mut UpdateContext::fixed(batch, 0, 0))
         .expect("a fixed batch is never empty")
+        .values()
+        .remove(0)
 }
 
 /// Runs the `dhrl` program with `args`, waiting for it.
