@@ -498,7 +498,6 @@ impl RunSlot {
         Ok(())
     }
 
-    /// Stops the run alone: its error goes to `RUN/failed.txt` and to its result.
     /// Stops this run for `error`: the whole training when it is `solo`, else the run alone
     /// ([`RunSlot::fail`]) while the rest of its stack goes on.
     fn stop(&mut self, error: TrainError, solo: bool) -> Result<(), TrainError> {
@@ -513,6 +512,7 @@ impl RunSlot {
         Ok(())
     }
 
+    /// Stops the run alone: its error goes to `RUN/failed.txt` and to its result.
     fn fail(&mut self, error: TrainError) {
         let path = self.run.join(FAILED);
         let _ = crate::files::write_atomically(&path, format!("{error}\n"));
