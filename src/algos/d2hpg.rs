@@ -284,6 +284,7 @@ impl Agent for D2hpg {
                     (losses, delay_free.distribution(&free_batch))
                 },
             );
+        regular.devices.settle();
 
         // 2. The delay-free policy's squashed actions at s, K per state, from its distribution
         //    before this update, held fixed. The regular policy's K samples reuse the same ε
@@ -336,6 +337,7 @@ impl Agent for D2hpg {
             }
         }
         stats.push(LIFTING_STAT, lifting_values);
+        regular.devices.settle();
         Ok(stats)
     }
 

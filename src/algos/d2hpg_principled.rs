@@ -668,6 +668,7 @@ impl Agent for D2hpgPrincipled {
                 (losses, abstract_learner.distribution(&abstract_batch))
             },
         );
+        regular.devices.settle();
 
         // 27. L_lift (Eq. 4): the regular policy's K actions at x, mapped by g_ω, against the
         //     abstract policy's K actions at x̄ = f(x), held fixed. With Ā = A both sides share
@@ -730,6 +731,7 @@ impl Agent for D2hpgPrincipled {
         for (name, values) in named {
             stats.push(name, values);
         }
+        self.regular.devices.settle();
         Ok(stats)
     }
 

@@ -408,6 +408,7 @@ impl Agent for DelayedSac {
             stats.push(MODEL_STATS[1], at_state.clone());
             stats.push_mean(MODEL_STATS[2], rollout);
         }
+        self.learner.devices.settle();
         Ok(stats)
     }
 

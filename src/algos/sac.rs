@@ -450,6 +450,7 @@ impl SacLearner {
     pub fn update(&mut self, batch: &SacBatch) -> Stats {
         let alphas = self.temperature.alpha_values();
         let critic_losses = self.update_critics(batch);
+        self.devices.settle();
         let distribution = self.distribution(batch);
         let (actor_losses, alpha_losses) = self.update_policy(batch, distribution, None);
         let mut stats = Stats::new();
@@ -460,6 +461,7 @@ impl SacLearner {
         {
             stats.push(name, values);
         }
+        self.devices.settle();
         stats
     }
 

@@ -824,6 +824,7 @@ impl Agent for Vdpo {
             stats.push_mean(BC_STATS[0], kls);
             stats.push(BC_STATS[1], steps);
         }
+        self.devices.settle();
         Ok(stats)
     }
 
