@@ -1,15 +1,17 @@
 //! The contract between an algorithm file and the rest of dhrl: the [`Agent`] the training loop
 //! drives, the sizes it is built for, and the [`AlgoConfig`] its configuration implements (its
 //! [`AlgoInfo`], its documented fields, its constructor).
+use std::ops::Range;
 use std::path::Path;
 
+use burn::prelude::{Device, Tensor};
 use serde::{Serialize, de::DeserializeOwned};
 
 use super::context::UpdateContext;
 use super::stats::Stats;
 use crate::acting::ActingNetwork;
 use crate::delay::{BatchExtras, ReplayError, Transitions};
-use crate::learn::{Devices, LearnError};
+use crate::learn::{Devices, LearnError, to_vec, upload_rows};
 use crate::sim::{SimError, TaskModel};
 use crate::tasks::TaskName;
 
@@ -62,20 +64,22 @@ pub enum ActMode {
 pub trait Agent: Send {
     /// How many runs the agent trains side by side.
     fn runs(&self) -> usize;
-    /// Actions `[rows, act_dim]` of run `run` for `rows` augmented states
-    /// `[rows, obs + Δ·act]`.
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32>;
-    /// Actions of every run in one pass (one upload, one download): `augmented` is
-    /// `[S, rows, obs + Δ·act]`, run `i`'s `counts[i]` states first in slice `i` and padding
-    /// after them; returns `[S, rows, act_dim]`, whose padding rows mean nothing. Run `i` draws
-    /// exploration noise for its `counts[i]` rows only, as a solo run given the same rows does.
-    fn act_runs(
+    /// The sizes the agent was built for.
+    fn spec(&self) -> &AgentSpec;
+    /// The plain device the agent acts on.
+    fn acting_device(&self) -> &Device;
+    /// Actions `[s, rows, act_dim]` of the runs `runs` (the whole stack, or one run) for their
+    /// augmented states `[s, rows, obs + Δ·act]` on [`Agent::acting_device`]: run
+    /// `runs.start + i` acts on its first `counts[i]` rows, drawing exploration noise for
+    /// those rows only, as a solo run given the same rows does; the rows after them are
+    /// padding, whose actions mean nothing.
+    fn act_tensor(
         &mut self,
-        augmented: &[f32],
+        runs: Range<usize>,
+        augmented: Tensor<3>,
         counts: &[usize],
-        rows: usize,
         mode: ActMode,
-    ) -> Vec<f32>;
+    ) -> Tensor<3>;
     /// One update of every run, run `i` drawing its batches from `contexts[i]` (as many as it
     /// needs); the statistics computed this time, on the device (an absent one is logged
     /// empty).
@@ -99,6 +103,27 @@ pub trait Agent: Send {
         None
     }
 
+    /// Actions `[rows, act_dim]` of run `run` for `rows` augmented states
+    /// `[rows, obs + Δ·act]`: one upload, one download.
+    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
+        let width = self.spec().augmented_dim();
+        let input = upload_rows(augmented, 1, rows, width, self.acting_device());
+        to_vec(self.act_tensor(run..run + 1, input, &[rows], mode))
+    }
+    /// Actions of every run in one pass (one upload, one download): `augmented` is
+    /// `[S, rows, obs + Δ·act]`, run `i`'s `counts[i]` states first in slice `i`
+    /// ([`Agent::act_tensor`]); returns `[S, rows, act_dim]`.
+    fn act_runs(
+        &mut self,
+        augmented: &[f32],
+        counts: &[usize],
+        rows: usize,
+        mode: ActMode,
+    ) -> Vec<f32> {
+        let (runs, width) = (self.runs(), self.spec().augmented_dim());
+        let input = upload_rows(augmented, runs, rows, width, self.acting_device());
+        to_vec(self.act_tensor(0..runs, input, counts, mode))
+    }
     /// [`Agent::act_run`] of run 0.
     fn act(&mut self, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
         self.act_run(0, augmented, rows, mode)

@@ -9,9 +9,10 @@
 //!
 //! These are exactly [`SacLearner`]'s steps with the actor's input `x` and the critics' input
 //! `s` ([`beta_batch`]). BPQL is also the regular learner of D2HPG (`d2hpg.rs`).
+use std::ops::Range;
 use std::path::Path;
 
-use burn::prelude::Device;
+use burn::prelude::{Device, Tensor};
 
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo};
 use super::context::UpdateContext;
@@ -102,20 +103,22 @@ impl Agent for Bpql {
         self.learner.runs()
     }
 
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let width = self.spec.augmented_dim();
-        self.learner.act_run(run, augmented, rows, width, mode)
+    fn spec(&self) -> &AgentSpec {
+        &self.spec
     }
 
-    fn act_runs(
+    fn acting_device(&self) -> &Device {
+        &self.learner.devices.plain
+    }
+
+    fn act_tensor(
         &mut self,
-        augmented: &[f32],
+        runs: Range<usize>,
+        augmented: Tensor<3>,
         counts: &[usize],
-        rows: usize,
         mode: ActMode,
-    ) -> Vec<f32> {
-        let width = self.spec.augmented_dim();
-        self.learner.act_runs(augmented, counts, rows, width, mode)
+    ) -> Tensor<3> {
+        self.learner.act_tensor(runs, augmented, counts, mode)
     }
 
     fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {

@@ -18,8 +18,10 @@
 //! threads (one after the other on one thread, with the same numbers).
 //!
 //! The regular policy is the one that acts; the delay-free one can be evaluated undelayed.
+use std::ops::Range;
 use std::path::Path;
 
+use burn::prelude::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use super::agent::{
@@ -203,20 +205,22 @@ impl Agent for D2hpg {
         self.regular.runs()
     }
 
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.regular
-            .act_run(run, augmented, rows, self.spec.augmented_dim(), mode)
+    fn spec(&self) -> &AgentSpec {
+        &self.spec
     }
 
-    fn act_runs(
+    fn acting_device(&self) -> &Device {
+        &self.regular.devices.plain
+    }
+
+    fn act_tensor(
         &mut self,
-        augmented: &[f32],
+        runs: Range<usize>,
+        augmented: Tensor<3>,
         counts: &[usize],
-        rows: usize,
         mode: ActMode,
-    ) -> Vec<f32> {
-        let width = self.spec.augmented_dim();
-        self.regular.act_runs(augmented, counts, rows, width, mode)
+    ) -> Tensor<3> {
+        self.regular.act_tensor(runs, augmented, counts, mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {

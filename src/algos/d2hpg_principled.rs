@@ -45,6 +45,7 @@
 //! 313 ± 251, population std over 3 seeds), level with D2HPG and BPQL, while Huber's
 //! distance, the held transition and λ ∈ {0.1, 0.01} separated nothing from the paper's forms
 //! (docs/experiments.md, "Principled D2HPG: the settings").
+use std::ops::Range;
 use std::path::Path;
 
 use burn::module::Module;
@@ -590,20 +591,22 @@ impl Agent for D2hpgPrincipled {
         self.regular.runs()
     }
 
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        self.regular
-            .act_run(run, augmented, rows, self.spec.augmented_dim(), mode)
+    fn spec(&self) -> &AgentSpec {
+        &self.spec
     }
 
-    fn act_runs(
+    fn acting_device(&self) -> &Device {
+        &self.regular.devices.plain
+    }
+
+    fn act_tensor(
         &mut self,
-        augmented: &[f32],
+        runs: Range<usize>,
+        augmented: Tensor<3>,
         counts: &[usize],
-        rows: usize,
         mode: ActMode,
-    ) -> Vec<f32> {
-        let width = self.spec.augmented_dim();
-        self.regular.act_runs(augmented, counts, rows, width, mode)
+    ) -> Tensor<3> {
+        self.regular.act_tensor(runs, augmented, counts, mode)
     }
 
     fn acting_network(&self) -> ActingNetwork {

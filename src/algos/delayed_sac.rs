@@ -18,6 +18,7 @@
 //! `s_{τ+1}`), `rollout_error` (Δ steps from `s_{τ−Δ}`, against the true `s_τ` the policy
 //! should have seen) and `rollout_error_mean` (the mean over the Δ intermediate true states
 //! `s_{τ−Δ+1..τ}`), each per state dimension, by the model before its step.
+use std::ops::Range;
 use std::path::Path;
 
 use burn::module::Module;
@@ -27,13 +28,13 @@ use serde::{Deserialize, Serialize};
 
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, check};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, SAC_STATS, SacBatch, SacLearner, host_input};
+use super::sac::{Config as SacConfig, SAC_STATS, SacBatch, SacLearner};
 use super::stats::Stats;
 use crate::acting::{ActingNetwork, RolloutModel};
 use crate::delay::{BatchExtras, ReplayError, Transitions};
 use crate::learn::{
     CheckpointDir, Devices, LearnError, Mlp, MlpConfig, TransitionTensors, adam, load_json_stack,
-    load_optimizer_stack, load_stack, matrix, select_runs, stack, stacked_rows, to_vec,
+    load_optimizer_stack, load_stack, matrix, select_runs, stack, stacked_rows,
 };
 use crate::seeds;
 
@@ -298,13 +299,26 @@ impl DelayedSac {
             .map(|(k, p)| prediction_error(p, truth.clone().narrow(2, k * obs, obs)))
             .collect()
     }
+}
 
-    /// Actions of the runs `runs` (the whole stack, or one run) for their augmented states
-    /// `[s, rows, aug]`: each run's model rolls its last observation forward through the
-    /// pending actions, and its policy acts on the predicted state.
+impl Agent for DelayedSac {
+    fn runs(&self) -> usize {
+        self.learner.runs()
+    }
+
+    fn spec(&self) -> &AgentSpec {
+        &self.spec
+    }
+
+    fn acting_device(&self) -> &Device {
+        &self.learner.devices.plain
+    }
+
+    /// Each run's model rolls its last observation forward through the pending actions, and
+    /// its policy acts on the predicted state.
     fn act_tensor(
         &mut self,
-        runs: std::ops::Range<usize>,
+        runs: Range<usize>,
         augmented: Tensor<3>,
         counts: &[usize],
         mode: ActMode,
@@ -318,30 +332,6 @@ impl DelayedSac {
             .pop()
             .unwrap_or(augmented); // Δ = 0: x_t = s_t
         self.learner.act_tensor(runs, state, counts, mode)
-    }
-}
-
-impl Agent for DelayedSac {
-    fn runs(&self) -> usize {
-        self.learner.runs()
-    }
-
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let aug = self.spec.augmented_dim();
-        let x = host_input(augmented, 1, rows, aug, &self.learner.devices.plain);
-        to_vec(self.act_tensor(run..run + 1, x, &[rows], mode))
-    }
-
-    fn act_runs(
-        &mut self,
-        augmented: &[f32],
-        counts: &[usize],
-        rows: usize,
-        mode: ActMode,
-    ) -> Vec<f32> {
-        let (runs, aug) = (self.runs(), self.spec.augmented_dim());
-        let x = host_input(augmented, runs, rows, aug, &self.learner.devices.plain);
-        to_vec(self.act_tensor(0..runs, x, counts, mode))
     }
 
     fn acting_network(&self) -> ActingNetwork {
@@ -440,7 +430,7 @@ mod tests {
     use burn::module::Param;
 
     use super::*;
-    use crate::learn::{LearnDevice, StackedLinear, assert_close as close};
+    use crate::learn::{LearnDevice, StackedLinear, assert_close as close, to_vec};
 
     /// One run's network of one linear layer `g(s, a) = w_s·s + w_a·a`.
     fn one_layer(w_s: f32, w_a: f32, device: &Device) -> Mlp {

@@ -1,8 +1,11 @@
 //! A stack served in several learner passes (`--runs-per-pass`): stacks of a few runs each,
 //! updated one after the other. Every run computes exactly what it computes alone.
+use std::ops::Range;
 use std::path::Path;
 
-use super::agent::{ActMode, Agent};
+use burn::prelude::{Device, Tensor};
+
+use super::agent::{ActMode, Agent, AgentSpec};
 use super::context::UpdateContext;
 use super::stats::Stats;
 use crate::acting::ActingNetwork;
@@ -19,17 +22,6 @@ impl Independent {
     pub fn new(agents: Vec<Box<dyn Agent>>) -> Independent {
         assert!(!agents.is_empty(), "a stack of at least one run");
         Independent { agents }
-    }
-
-    /// The agent that holds run `run`, and the run's place in it.
-    fn agent_of(&mut self, mut run: usize) -> (&mut Box<dyn Agent>, usize) {
-        for agent in &mut self.agents {
-            if run < agent.runs() {
-                return (agent, run);
-            }
-            run -= agent.runs();
-        }
-        panic!("no run {run} in the stack")
     }
 
     /// `items` (one per run) cut into each agent's part.
@@ -65,28 +57,39 @@ impl Agent for Independent {
         self.agents.iter().map(|agent| agent.runs()).sum()
     }
 
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let (agent, run) = self.agent_of(run);
-        agent.act_run(run, augmented, rows, mode)
+    fn spec(&self) -> &AgentSpec {
+        self.agents[0].spec()
     }
 
-    fn act_runs(
+    fn acting_device(&self) -> &Device {
+        self.agents[0].acting_device()
+    }
+
+    /// Each agent acts for its part of `runs`, on its slices of `augmented`.
+    fn act_tensor(
         &mut self,
-        augmented: &[f32],
+        runs: Range<usize>,
+        augmented: Tensor<3>,
         counts: &[usize],
-        rows: usize,
         mode: ActMode,
-    ) -> Vec<f32> {
-        let block = augmented.len() / counts.len();
+    ) -> Tensor<3> {
         let mut actions = Vec::new();
-        let (mut first, mut augmented) = (0, augmented);
+        let mut first = 0;
         for agent in &mut self.agents {
-            let runs = agent.runs();
-            let (part, rest) = augmented.split_at(runs * block);
-            actions.extend(agent.act_runs(part, &counts[first..first + runs], rows, mode));
-            (first, augmented) = (first + runs, rest);
+            let (start, end) = (runs.start.max(first), runs.end.min(first + agent.runs()));
+            if start < end {
+                let slices = start - runs.start..end - runs.start;
+                let part = augmented.clone().narrow(0, slices.start, slices.len());
+                actions.push(agent.act_tensor(
+                    start - first..end - first,
+                    part,
+                    &counts[slices],
+                    mode,
+                ));
+            }
+            first += agent.runs();
         }
-        actions
+        Tensor::cat(actions, 0)
     }
 
     fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {

@@ -5,6 +5,7 @@
 //! [`SacAgent`] chooses that input from a transition. `sac` below is the delay-free reference
 //! on the true state; `naive_sac.rs` and `augmented_sac.rs` are the two delayed baselines.
 //! BPQL and D2HPG reuse [`SacLearner`] for their delay-free parts.
+use std::ops::Range;
 use std::path::Path;
 
 use burn::module::Module;
@@ -20,7 +21,7 @@ use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, Temperature,
     TransitionTensors, TwinQ, actor_loss, adam, batch_mean, critic_loss, critic_target,
     load_json_stack, load_optimizer_stack, load_stack, polyak, select_runs, squashed_sample, stack,
-    temperature_loss, to_vec, upload,
+    temperature_loss, to_vec, upload_rows,
 };
 
 crate::algo_config! {
@@ -281,7 +282,7 @@ impl SacLearner {
         width: usize,
         mode: ActMode,
     ) -> Vec<f32> {
-        let input = host_input(inputs, 1, rows, width, &self.devices.plain);
+        let input = upload_rows(inputs, 1, rows, width, &self.devices.plain);
         to_vec(self.act_tensor(run..run + 1, input, &[rows], mode))
     }
 
@@ -295,7 +296,7 @@ impl SacLearner {
         width: usize,
         mode: ActMode,
     ) -> Vec<f32> {
-        let input = host_input(inputs, self.runs(), rows, width, &self.devices.plain);
+        let input = upload_rows(inputs, self.runs(), rows, width, &self.devices.plain);
         to_vec(self.act_tensor(0..self.runs(), input, counts, mode))
     }
 
@@ -304,7 +305,7 @@ impl SacLearner {
     /// `counts[i]` rows from its noise stream.
     pub fn act_tensor(
         &mut self,
-        runs: std::ops::Range<usize>,
+        runs: Range<usize>,
         input: Tensor<3>,
         counts: &[usize],
         mode: ActMode,
@@ -509,21 +510,6 @@ impl SacLearner {
     }
 }
 
-/// `[runs, rows, width]` from the first `runs · rows · width` of `values` (row-major).
-pub(super) fn host_input(
-    values: &[f32],
-    runs: usize,
-    rows: usize,
-    width: usize,
-    device: &Device,
-) -> Tensor<3> {
-    let len = runs * rows * width;
-    upload(
-        TensorData::new(values[..len].to_vec(), [runs, rows, width]),
-        device,
-    )
-}
-
 /// Which part of a transition the SAC baselines condition on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum InputView {
@@ -543,29 +529,23 @@ impl InputView {
         }
     }
 
-    /// The view's rows out of `rows` augmented states.
-    fn from_augmented(self, augmented: &[f32], rows: usize, spec: &AgentSpec) -> Vec<f32> {
-        let (aug, width) = (spec.augmented_dim(), self.width(spec));
-        if width == aug {
-            return augmented[..rows * aug].to_vec();
+    /// The view of augmented states `[S, rows, obs + Δ·act]`; not for `TrueState`, which a
+    /// batch holds apart and acting reads as `LastObservation` ([`SacAgent::acting_view`]).
+    fn of_augmented(self, augmented: Tensor<3>, spec: &AgentSpec) -> Tensor<3> {
+        match self {
+            InputView::LastObservation => augmented.narrow(2, 0, spec.obs_dim),
+            InputView::TrueState | InputView::Augmented => augmented,
         }
-        augmented
-            .chunks(aug)
-            .take(rows)
-            .flat_map(|x| &x[..width])
-            .copied()
-            .collect()
     }
 
     /// `(input, next input)` of the runs' batches, `[S, B, width]` each, from their tensors.
     fn of_batch(self, t: &TransitionTensors, spec: &AgentSpec) -> (Tensor<3>, Tensor<3>) {
         match self {
             InputView::TrueState => (t.state.clone(), t.next_state.clone()),
-            InputView::LastObservation => (
-                t.augmented.clone().narrow(2, 0, spec.obs_dim),
-                t.next_augmented.clone().narrow(2, 0, spec.obs_dim),
+            view => (
+                view.of_augmented(t.augmented.clone(), spec),
+                view.of_augmented(t.next_augmented.clone(), spec),
             ),
-            InputView::Augmented => (t.augmented.clone(), t.next_augmented.clone()),
         }
     }
 }
@@ -653,24 +633,23 @@ impl Agent for SacAgent {
         self.learner.runs()
     }
 
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let view = self.acting_view();
-        let inputs = view.from_augmented(augmented, rows, &self.spec);
-        self.learner
-            .act_run(run, &inputs, rows, view.width(&self.spec), mode)
+    fn spec(&self) -> &AgentSpec {
+        &self.spec
     }
 
-    fn act_runs(
+    fn acting_device(&self) -> &Device {
+        &self.learner.devices.plain
+    }
+
+    fn act_tensor(
         &mut self,
-        augmented: &[f32],
+        runs: Range<usize>,
+        augmented: Tensor<3>,
         counts: &[usize],
-        rows: usize,
         mode: ActMode,
-    ) -> Vec<f32> {
-        let view = self.acting_view();
-        let inputs = view.from_augmented(augmented, self.runs() * rows, &self.spec);
-        let width = view.width(&self.spec);
-        self.learner.act_runs(&inputs, counts, rows, width, mode)
+    ) -> Tensor<3> {
+        let input = self.acting_view().of_augmented(augmented, &self.spec);
+        self.learner.act_tensor(runs, input, counts, mode)
     }
 
     fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {

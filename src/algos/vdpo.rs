@@ -31,6 +31,7 @@
 //! nothing to mask), dhrl's log σ clamp [−20, 2] (not tanh-scaled [−5, 2]), the transformer's
 //! weights from burn's initialiser (not N(0, 0.02)), and a cloning stage whose transformer runs
 //! without dropout (it is off the graph; the reference keeps it in training mode).
+use std::ops::Range;
 use std::path::Path;
 
 use burn::module::{Module, Param};
@@ -46,7 +47,7 @@ use serde::{Deserialize, Serialize};
 
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, check};
 use super::context::UpdateContext;
-use super::sac::{Config as SacConfig, LearningRates, SacBatch, SacLearner, host_input};
+use super::sac::{Config as SacConfig, LearningRates, SacBatch, SacLearner};
 use super::stats::Stats;
 use crate::acting::{ActingNetwork, BeliefTransformer, TransformerBlock};
 use crate::delay::{BatchExtras, ReplayError};
@@ -612,36 +613,6 @@ impl Vdpo {
         }
     }
 
-    /// Actions of the runs `runs` (the whole stack, or one run) for their augmented states
-    /// `[s, rows, aug]`: the policy head on the belief's features at the newest position, run
-    /// `runs.start + i` sampling for its first `counts[i]` rows from its exploration stream.
-    fn act_tensor(
-        &mut self,
-        runs: std::ops::Range<usize>,
-        augmented: Tensor<3>,
-        counts: &[usize],
-        mode: ActMode,
-    ) -> Tensor<3> {
-        let stack = self.runs();
-        let belief = select_runs(self.belief.valid(), runs.clone(), stack);
-        let head = select_runs(self.policy_head.valid(), runs.clone(), stack);
-        let rows = augmented.dims()[1];
-        let h = belief.last_features(augmented, &self.spec);
-        match mode {
-            ActMode::Explore => {
-                let eps = Noise::stacked_normal_rows(
-                    self.schedules[runs].iter_mut().map(|s| &mut s.noise),
-                    counts,
-                    rows,
-                    self.spec.act_dim,
-                    &self.devices.plain,
-                );
-                head.sample(h, eps, &self.scale).action
-            }
-            ActMode::Deterministic => head.mode(h, &self.scale),
-        }
-    }
-
     /// One update of the reference SAC on the true `(s, a, r, s')`; returns its statistics.
     fn update_reference(&mut self, batch: &SacBatch, updates_before: u64) -> Stats {
         let mut stats = Stats::new();
@@ -741,22 +712,40 @@ impl Agent for Vdpo {
         self.seeds.len()
     }
 
-    fn act_run(&mut self, run: usize, augmented: &[f32], rows: usize, mode: ActMode) -> Vec<f32> {
-        let width = self.spec.augmented_dim();
-        let x = host_input(augmented, 1, rows, width, &self.devices.plain);
-        to_vec(self.act_tensor(run..run + 1, x, &[rows], mode))
+    fn spec(&self) -> &AgentSpec {
+        &self.spec
     }
 
-    fn act_runs(
+    fn acting_device(&self) -> &Device {
+        &self.devices.plain
+    }
+
+    /// The policy head on the belief's features at the newest position.
+    fn act_tensor(
         &mut self,
-        augmented: &[f32],
+        runs: Range<usize>,
+        augmented: Tensor<3>,
         counts: &[usize],
-        rows: usize,
         mode: ActMode,
-    ) -> Vec<f32> {
-        let (runs, width) = (self.runs(), self.spec.augmented_dim());
-        let x = host_input(augmented, runs, rows, width, &self.devices.plain);
-        to_vec(self.act_tensor(0..runs, x, counts, mode))
+    ) -> Tensor<3> {
+        let stack = self.runs();
+        let belief = select_runs(self.belief.valid(), runs.clone(), stack);
+        let head = select_runs(self.policy_head.valid(), runs.clone(), stack);
+        let rows = augmented.dims()[1];
+        let h = belief.last_features(augmented, &self.spec);
+        match mode {
+            ActMode::Explore => {
+                let eps = Noise::stacked_normal_rows(
+                    self.schedules[runs].iter_mut().map(|s| &mut s.noise),
+                    counts,
+                    rows,
+                    self.spec.act_dim,
+                    &self.devices.plain,
+                );
+                head.sample(h, eps, &self.scale).action
+            }
+            ActMode::Deterministic => head.mode(h, &self.scale),
+        }
     }
 
     fn acting_network(&self) -> ActingNetwork {

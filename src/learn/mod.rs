@@ -29,7 +29,9 @@ pub use stack::{
 };
 #[cfg(test)]
 pub(crate) use tensors::assert_close;
-pub use tensors::{Transfers, TransitionTensors, matrix, stacked_rows, to_vec, transfers, upload};
+pub use tensors::{
+    Transfers, TransitionTensors, matrix, stacked_rows, to_vec, transfers, upload, upload_rows,
+};
 
 /// What can go wrong while learning, saving or loading.
 #[derive(Debug, thiserror::Error)]

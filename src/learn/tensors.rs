@@ -41,6 +41,21 @@ pub fn upload<const D: usize>(data: TensorData, device: &Device) -> Tensor<D> {
     Tensor::from_data(data, device)
 }
 
+/// `[runs, rows, width]` from the first `runs · rows · width` of `values` (row-major): one upload.
+pub fn upload_rows(
+    values: &[f32],
+    runs: usize,
+    rows: usize,
+    width: usize,
+    device: &Device,
+) -> Tensor<3> {
+    let len = runs * rows * width;
+    upload(
+        TensorData::new(values[..len].to_vec(), [runs, rows, width]),
+        device,
+    )
+}
+
 /// A `[rows, cols]` tensor from row-major values.
 pub fn matrix(values: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
     upload(TensorData::new(values, [rows, cols]), device)
