@@ -1,5 +1,6 @@
 //! The CPU delay layer alone at HalfCheetah sizes, fed with synthetic steps (a twentieth of
-//! the copies finishing each step), for Δ = 5, 10, 20.
+//! the copies finishing each step), for Δ = 5, 10, 20: a step, and a step with its completed
+//! transitions gathered (what the Python batch hands back each step).
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use dhrl::delay::{CpuDelayLayer, DelayConfig, DelayLayer, StepInput};
 
@@ -27,22 +28,32 @@ fn delay_layer_step(c: &mut Criterion) {
         .unwrap();
         layer.reset(&observations).unwrap();
         let mut step = 0usize;
-        group.bench_function(format!("{ENVS} copies, delay {delay}"), |b| {
-            b.iter(|| {
-                step += 1;
-                let truncated = if step % 50 == 0 { &some } else { &never };
-                let input = StepInput {
-                    actions: &actions,
-                    observations: &observations,
-                    final_observations: &observations,
-                    rewards: &rewards,
-                    terminated: &never,
-                    truncated,
-                    controls: None,
-                };
-                layer.step(&input).unwrap();
-            })
-        });
+        for with_transitions in [false, true] {
+            let what = if with_transitions {
+                ", transitions"
+            } else {
+                ""
+            };
+            group.bench_function(format!("{ENVS} copies, delay {delay}{what}"), |b| {
+                b.iter(|| {
+                    step += 1;
+                    let truncated = if step % 50 == 0 { &some } else { &never };
+                    let input = StepInput {
+                        actions: &actions,
+                        observations: &observations,
+                        final_observations: &observations,
+                        rewards: &rewards,
+                        terminated: &never,
+                        truncated,
+                        controls: None,
+                    };
+                    layer.step(&input).unwrap();
+                    if with_transitions {
+                        std::hint::black_box(layer.transitions().unwrap());
+                    }
+                })
+            });
+        }
     }
     group.finish();
 }
