@@ -850,12 +850,14 @@ impl Trainer {
         if self.pending.is_empty() {
             return Ok(());
         }
-        let pending = std::mem::take(&mut self.pending);
-        let stats: Vec<Stats> = pending.iter().map(|update| update.stats.clone()).collect();
+        let (stats, counters): (Vec<Stats>, Vec<_>) = std::mem::take(&mut self.pending)
+            .into_iter()
+            .map(|update| (update.stats, update.counters))
+            .unzip();
         let values = Stats::download(&stats);
         let solo = self.slots.len() == 1;
-        for (update, runs) in pending.iter().zip(values) {
-            for ((slot, counters), stats) in self.slots.iter_mut().zip(&update.counters).zip(runs) {
+        for (counters, runs) in counters.iter().zip(values) {
+            for ((slot, counters), stats) in self.slots.iter_mut().zip(counters).zip(runs) {
                 let Some((updates, env_steps)) = *counters else {
                     continue;
                 };
