@@ -529,12 +529,14 @@ impl InputView {
         }
     }
 
-    /// The view of augmented states `[S, rows, obs + Δ·act]`; not for `TrueState`, which a
-    /// batch holds apart and acting reads as `LastObservation` ([`SacAgent::acting_view`]).
+    /// The view of augmented states `[S, rows, obs + Δ·act]` (what acting reads). `TrueState`
+    /// reads their first `obs_dim` entries, `s_t` at Δ = 0; a batch holds `s_t` apart.
     fn of_augmented(self, augmented: Tensor<3>, spec: &AgentSpec) -> Tensor<3> {
         match self {
-            InputView::LastObservation => augmented.narrow(2, 0, spec.obs_dim),
-            InputView::TrueState | InputView::Augmented => augmented,
+            InputView::TrueState | InputView::LastObservation => {
+                augmented.narrow(2, 0, spec.obs_dim)
+            }
+            InputView::Augmented => augmented,
         }
     }
 
@@ -591,15 +593,6 @@ impl SacAgent {
         }
     }
 
-    /// What the policy reads of an augmented state when acting.
-    fn acting_view(&self) -> InputView {
-        match self.view {
-            // At Δ = 0 the first obs_dim entries of x_t are s_t.
-            InputView::TrueState => InputView::LastObservation,
-            view => view,
-        }
-    }
-
     /// The runs' batches on `view`.
     fn batch(
         view: InputView,
@@ -648,7 +641,7 @@ impl Agent for SacAgent {
         counts: &[usize],
         mode: ActMode,
     ) -> Tensor<3> {
-        let input = self.acting_view().of_augmented(augmented, &self.spec);
+        let input = self.view.of_augmented(augmented, &self.spec);
         self.learner.act_tensor(runs, input, counts, mode)
     }
 
