@@ -7,7 +7,9 @@ resets included; every vector step counts ``num_envs`` environment steps.
 Beside them, in the same process, the two anchors of dhrl's own path: the same batch stepped
 inside the library with nothing built for Python ("Rust", ``Batch.time_native_steps``), and
 one copy stepped by bare ``mj_step`` calls on one thread ("raw", hot in cache; the physical
-limit of a batch is about the thread count times it).
+limit of a batch is about the thread count times it). "Rust" and dhrl at Δ are measured in
+alternating slices (six each, twice ``--seconds`` in all), so that their ratio, the cost of the
+Python path, does not take in the machine's drift between two separate windows.
 
 Every column executes the same random actions: ``DelayObservation`` passes the agent's
 actions on from the first step, so dhrl's delayed env runs with ``warmup="random"`` (uniform
@@ -34,18 +36,24 @@ from gymnasium import spaces
 from machine import cpu_model  # this folder's module (the script's folder is on sys.path)
 
 
-def measure(step: Callable[[np.ndarray], object], actions: np.ndarray, seconds: float) -> float:
-    """Environment steps per second of ``step`` over at least ``seconds`` (after 5 warm-up steps)."""
-    num_envs = actions.shape[1]
-    for k in range(5):
-        step(actions[k % len(actions)])
+def timed_steps(step: Callable[[np.ndarray], object], actions: np.ndarray, seconds: float) -> tuple[int, float]:
+    """Calls ``step`` with ``actions[0], actions[1], …`` (cycling) for at least ``seconds``:
+    (calls, seconds taken)."""
     steps, start = 0, time.perf_counter()
     while True:
         step(actions[steps % len(actions)])
         steps += 1
         elapsed = time.perf_counter() - start
         if elapsed >= seconds and steps >= 3:
-            return steps * num_envs / elapsed
+            return steps, elapsed
+
+
+def measure(step: Callable[[np.ndarray], object], actions: np.ndarray, seconds: float) -> float:
+    """Environment steps per second of ``step`` over at least ``seconds`` (after 5 warm-up steps)."""
+    for k in range(5):
+        step(actions[k % len(actions)])
+    steps, elapsed = timed_steps(step, actions, seconds)
+    return steps * actions.shape[1] / elapsed
 
 
 def bench_dhrl(gym_id: str, num_envs: int, delay: int, threads: int, actions, seconds) -> float:
@@ -59,22 +67,52 @@ def bench_dhrl(gym_id: str, num_envs: int, delay: int, threads: int, actions, se
         env.close()
 
 
-def bench_native(gym_id: str, num_envs: int, delay: int, threads: int, actions, seconds) -> float:
-    """The batch of ``bench_dhrl`` stepped inside the library, nothing returned to Python."""
+def bench_python_and_native(
+    gym_id: str, num_envs: int, delay: int, threads: int, actions, seconds, rounds: int = 6
+) -> tuple[float, float]:
+    """Steps/s of the same batch stepped inside the library with nothing returned to Python
+    (``Batch.time_native_steps``) and through ``env.step``, two envs of one configuration
+    measured in alternating slices of ``seconds / rounds`` each: the machine's drift (other
+    processes, clock) falls on both alike, so their ratio is steadier than two separate windows."""
     import dhrl
 
-    env = dhrl.make_vec(gym_id, num_envs, delay=delay, num_threads=threads, warmup="random")
-    env.reset(seed=0)
+    envs = [
+        dhrl.make_vec(gym_id, num_envs, delay=delay, num_threads=threads, warmup="random")
+        for _ in range(2)
+    ]
     try:
+        for env in envs:
+            env.reset(seed=0)
+        native, python = envs
         table = np.ascontiguousarray(actions, np.float32)
-        env._batch.time_native_steps(table, 5)
-        steps, elapsed = 8, 0.0
-        while elapsed < seconds:
-            elapsed = env._batch.time_native_steps(table, steps)
-            steps *= 2
-        return steps // 2 * num_envs / elapsed
+
+        calls = [8]  # steps per native call, doubled until one call lasts a slice
+
+        def native_steps(slice_seconds: float) -> tuple[int, float]:
+            # One call steps `calls[0]` times (the pool's threads stay awake between its steps).
+            while True:
+                elapsed = native._batch.time_native_steps(table, calls[0])
+                if elapsed >= slice_seconds:
+                    return calls[0], elapsed
+                calls[0] *= 2
+
+        native_steps(0.0)
+        for k in range(5):
+            python.step(actions[k % len(actions)])
+        totals = {"native": [0, 0.0], "python": [0, 0.0]}
+        for _ in range(rounds):
+            for name, run in (
+                ("native", native_steps),
+                ("python", lambda s: timed_steps(python.step, actions, s)),
+            ):
+                steps, elapsed = run(seconds / rounds)
+                totals[name][0] += steps
+                totals[name][1] += elapsed
+        rate = {name: steps * num_envs / elapsed for name, (steps, elapsed) in totals.items()}
+        return rate["native"], rate["python"]
     finally:
-        env.close()
+        for env in envs:
+            env.close()
 
 
 def bench_raw(gym_id: str, seconds: float) -> float:
@@ -183,13 +221,14 @@ def main(argv: list[str] | None = None) -> int:
             assert isinstance(space, spaces.Box)
             low, high = space.low, space.high
             actions = np.random.default_rng(0).uniform(low, high, (64, n, low.size)).astype(np.float32)
+            native, python = bench_python_and_native(gym_id, n, delay, args.threads, actions, 2 * args.seconds)
             row = {
                 "task": gym_id,
                 "copies": n,
                 "raw": bench_raw(gym_id, args.seconds),
-                "dhrl_native_delayed": bench_native(gym_id, n, delay, args.threads, actions, args.seconds),
+                "dhrl_native_delayed": native,
+                "dhrl_delayed": python,
                 "dhrl_delay0": bench_dhrl(gym_id, n, 0, args.threads, actions, args.seconds),
-                "dhrl_delayed": bench_dhrl(gym_id, n, delay, args.threads, actions, args.seconds),
                 "gym_sync": bench_gymnasium(gym_id, n, delay, "sync", actions, args.seconds),
                 "gym_async": (
                     bench_gymnasium(gym_id, n, delay, "async", actions, args.seconds)
