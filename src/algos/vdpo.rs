@@ -474,21 +474,25 @@ impl DropoutMasks {
         }
         let shape = x.shape();
         let per_run = shape.num_elements() / runs.len();
-        let mask: Vec<f32> = runs.iter_mut().flat_map(|run| run.mask(per_run)).collect();
+        let mut mask = vec![0.0f32; shape.num_elements()];
+        for (run, slice) in runs.iter_mut().zip(mask.chunks_mut(per_run)) {
+            run.fill_mask(slice);
+        }
         let mask = upload(TensorData::new(mask, shape), &x.device());
         x * mask
     }
 
-    /// `n` entries of a mask.
-    fn mask(&mut self, n: usize) -> Vec<f32> {
-        let mut bits = vec![0u32; n];
-        self.rng.fill(&mut bits[..]);
+    /// Fills `mask` with the next `mask.len()` entries of this run's masks: one `u32` of the
+    /// stream per entry, written in place (an entry-by-entry collect was 4% of an update).
+    fn fill_mask(&mut self, mask: &mut [f32]) {
+        let bits: &mut [u32] = bytemuck::cast_slice_mut(mask);
+        self.rng.fill(bits);
         let keep = 1.0 - self.prob;
         let threshold = (keep * 4_294_967_296.0) as u64;
-        let scale = (1.0 / keep) as f32;
-        bits.into_iter()
-            .map(|b| if u64::from(b) < threshold { scale } else { 0.0 })
-            .collect()
+        let scale = ((1.0 / keep) as f32).to_bits();
+        for b in bits.iter_mut() {
+            *b = if u64::from(*b) < threshold { scale } else { 0 };
+        }
     }
 }
 
