@@ -241,11 +241,15 @@ pub(super) fn transitions_from(
         out.episode.push(record.meta.episode);
         out.tau.push(record.meta.tau);
         let at = out.augmented.len();
-        write_augmented(l, ring, slot, &mut out.augmented);
+        l.push_augmented(|k| ring_row(l, ring, slot, k), &mut out.augmented);
         out.state.extend_from_slice(record.state);
         out.action.extend_from_slice(record.action);
         out.reward.push(record.reward);
-        write_next_augmented(l, ring, slot, &out.augmented[at..], &mut out.next_augmented);
+        l.push_next_augmented(
+            &out.augmented[at..],
+            |k| ring_row(l, ring, slot, k),
+            &mut out.next_augmented,
+        );
         out.next_state
             .extend_from_slice(&ring[next * stride..next * stride + l.obs_dim]);
         out.terminated
@@ -259,30 +263,6 @@ fn ring_row<'r>(l: &DelayLayout, ring: &'r [f32], slot: usize, k: usize) -> &'r 
     let (ring_len, stride) = (l.ring_len(), l.stride());
     let s = (slot + ring_len - l.delay + k) % ring_len;
     &ring[s * stride..(s + 1) * stride]
-}
-
-/// Appends `x` of the step in ring slot `slot`.
-fn write_augmented(l: &DelayLayout, ring: &[f32], slot: usize, out: &mut Vec<f32>) {
-    l.push_augmented(|k| ring_row(l, ring, slot, k), out);
-}
-
-/// Appends `x_{τ+1}` of the step in ring slot `slot`, given its `x_τ` (`augmented`): the two
-/// share Δ − 1 actions, so `x_{τ+1} = (s_{τ+1−Δ}, a_{τ+1−Δ} … a_{τ−1}, a_τ)` is three copies
-/// instead of Δ + 1 (the gather's cost is one short `memcpy` call per copy).
-fn write_next_augmented(
-    l: &DelayLayout,
-    ring: &[f32],
-    slot: usize,
-    augmented: &[f32],
-    out: &mut Vec<f32>,
-) {
-    let (obs, act) = (l.obs_dim, l.act_dim);
-    out.reserve(l.augmented_dim());
-    out.extend_from_slice(&ring_row(l, ring, slot, 1)[..obs]);
-    if l.delay > 0 {
-        out.extend_from_slice(&augmented[obs + act..]);
-        out.extend_from_slice(&ring_row(l, ring, slot, l.delay)[obs..obs + act]);
-    }
 }
 
 /// Puts `s_0` of a new episode at the cursor (advanced past the last episode's `s_T` when

@@ -94,6 +94,24 @@ impl DelayLayout {
             out.extend_from_slice(&row(k)[obs..obs + act]);
         }
     }
+    /// Appends `x_{τ+1}` to `out` given `x_τ` (`augmented`) and the stored steps `row(0..=Δ)`
+    /// of `x_τ` (as [`DelayLayout::assemble_augmented`]'s, row Δ being step τ itself): the two
+    /// share Δ − 1 actions, so `x_{τ+1} = (s_{τ+1−Δ}, a_{τ+1−Δ} … a_{τ−1}, a_τ)` is three copies
+    /// instead of Δ + 1 (a transition's gather costs one short `memcpy` call per copy).
+    pub fn push_next_augmented<'r>(
+        &self,
+        augmented: &[f32],
+        row: impl Fn(usize) -> &'r [f32],
+        out: &mut Vec<f32>,
+    ) {
+        let (obs, act) = (self.obs_dim, self.act_dim);
+        out.reserve(self.augmented_dim());
+        out.extend_from_slice(&row(1)[..obs]);
+        if self.delay > 0 {
+            out.extend_from_slice(&augmented[obs + act..]);
+            out.extend_from_slice(&row(self.delay)[obs..obs + act]);
+        }
+    }
     /// Steps kept per copy: transition τ completes at τ + 1 + Δ and needs `s_{τ-Δ}`; an episode
     /// end flushes τ down to T − Δ − 1, so `s_{T-2Δ-1} … s_T` (2Δ + 2 states) must survive the
     /// step that also writes the next episode's `s_0`: 2Δ + 3 slots.

@@ -225,11 +225,16 @@ impl ReplayStore {
         out.copy.push(c);
         out.episode.push(m.episode);
         out.tau.push(m.tau);
+        let at = out.augmented.len();
         l.push_augmented(|k| row(i - l.delay + k), &mut out.augmented);
         out.state.extend_from_slice(&row(i)[..obs]);
         out.action.extend_from_slice(&row(i)[obs..obs + act]);
         out.reward.push(row(i)[stride - 1]);
-        l.push_augmented(|k| row(i + 1 - l.delay + k), &mut out.next_augmented);
+        l.push_next_augmented(
+            &out.augmented[at..],
+            |k| row(i - l.delay + k),
+            &mut out.next_augmented,
+        );
         out.next_state.extend_from_slice(&row(i + 1)[..obs]);
         out.terminated
             .push(u32::from(m.flags & RECORD_TERMINATED != 0));
