@@ -57,6 +57,10 @@ class _Stepped(_Current):
     """``[N]``: the delivered rewards (those travelling with the observations)."""
     terminated: npt.NDArray[np.bool_]
     truncated: npt.NDArray[np.bool_]
+    done: npt.NDArray[np.bool_]
+    """``[N]``: terminated or truncated."""
+    ended: bool
+    """Whether any copy's episode ended in this step (``done.any()``)."""
     diverged: npt.NDArray[np.bool_]
     """``[N]``: the copy's simulation diverged (its episode ended, truncated)."""
     final_augmented: npt.NDArray[np.float32]
@@ -126,7 +130,7 @@ class Batch:
     def step(
         self, actions: npt.NDArray[np.float32], controls: npt.NDArray[np.uint8] | None = None
     ) -> _Stepped:
-        """One step of every copy. ``actions``: C-contiguous ``[N, act_dim]`` float32;
+        """One step of every copy. ``actions``: C-contiguous ``[N, act_dim]`` float32, all finite;
         ``controls``: ``[N]`` uint8 (0 step, 1 hold, 2 restart), every copy stepping when None."""
 
 def raw_mj_step_rate(task: str, copies: int, env_steps: int) -> float:

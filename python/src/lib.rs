@@ -277,9 +277,9 @@ impl Batch {
         })
     }
 
-    /// One step of every copy. `actions`: `[N, act]` float32; the rows of copies still in
-    /// warm-up are replaced by warm-up actions. `controls`: `[N]` uint8 (0 step, 1 hold,
-    /// 2 restart), every copy stepping when `None`.
+    /// One step of every copy. `actions`: `[N, act]` float32, all finite (checked: nothing is
+    /// stepped otherwise); the rows of copies still in warm-up are replaced by warm-up actions.
+    /// `controls`: `[N]` uint8 (0 step, 1 hold, 2 restart), every copy stepping when `None`.
     #[pyo3(signature = (actions, controls=None))]
     fn step<'py>(
         &self,
@@ -297,6 +297,18 @@ impl Batch {
                 core.actions.len(),
                 self.num_envs,
                 self.act_dim
+            )));
+        }
+        if let Some(at) = given.iter().position(|v| !v.is_finite()) {
+            let value = match given[at] {
+                v if v.is_nan() => "nan",
+                v if v > 0.0 => "inf",
+                _ => "-inf",
+            };
+            return Err(PyValueError::new_err(format!(
+                "actions[{}, {}] is {value}; only finite numbers are accepted (nothing was stepped)",
+                at / self.act_dim,
+                at % self.act_dim
             )));
         }
         core.actions.copy_from_slice(given);
@@ -373,6 +385,13 @@ fn stepped<'py>(py: Python<'py>, core: &Core) -> PyResult<Bound<'py, PyDict>> {
     out.set_item("reward", rewards.into_pyarray(py))?;
     out.set_item("terminated", flags(py, env.terminated()))?;
     out.set_item("truncated", flags(py, env.truncated()))?;
+    // Their union and whether it holds anywhere, so that the wrapper's every step needs no
+    // numpy operation of its own to learn whether an episode ended.
+    let done: Vec<bool> = (env.terminated().iter().zip(env.truncated()))
+        .map(|(&t, &u)| t != 0 || u != 0)
+        .collect();
+    out.set_item("ended", done.contains(&true))?;
+    out.set_item("done", done.into_pyarray(py))?;
     out.set_item("diverged", flags(py, env.diverged()))?;
     out.set_item("final_augmented", f32_rows(py, final_augmented, aug)?)?;
     out.set_item(

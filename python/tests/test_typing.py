@@ -69,7 +69,9 @@ def typed_dict(names: dict[str, ast.AST], name: str) -> dict[str, ast.expr]:
 def check_arrays(fields: dict[str, ast.expr], names: dict[str, ast.AST], value: dict, where: str) -> None:
     assert set(fields) == set(value), f"{where}: stub keys {sorted(fields)} vs runtime {sorted(value)}"
     for key, annotation in fields.items():
-        if isinstance(annotation, ast.Name):  # a nested TypedDict
+        if ast.unparse(annotation) == "bool":
+            assert isinstance(value[key], bool), (where, key, type(value[key]))
+        elif isinstance(annotation, ast.Name):  # a nested TypedDict
             check_arrays(typed_dict(names, annotation.id), names, value[key], f"{where}[{key!r}]")
         else:
             assert isinstance(value[key], np.ndarray), (where, key)
@@ -128,6 +130,14 @@ def test_returned_dicts_and_values_match_the_stub(stub):
         out = batch.step(np.zeros((2, 3), np.float32), np.zeros(2, np.uint8))
     assert len(out["transitions"]["env"]) == 2
     check_arrays(typed_dict(names, "_Stepped"), names, out, "step()")
+    # `done` and `ended` say what the flags say, up to and through a step that ends an episode.
+    for _ in range(1000):
+        np.testing.assert_array_equal(out["done"], out["terminated"] | out["truncated"])
+        assert out["ended"] == bool(out["done"].any())
+        if out["ended"]:
+            break
+        out = batch.step(np.ones((2, 3), np.float32), np.zeros(2, np.uint8))
+    assert out["ended"], "no episode ended in 1,000 steps"
     low, high = batch.action_bounds()
     assert low.dtype == high.dtype == np.float64
     assert isinstance(batch.workers_flush_subnormals(), list)
