@@ -363,13 +363,16 @@ pub fn bench_update(
     use crate::algos::{AgentSpec, UpdateContext, random_batch};
     let spec = AgentSpec::for_task(task, delay)?;
     let devices = crate::learn::Devices::new(device)?;
-    let mut agent = algo.build(&spec, &devices, 0);
+    let mut agent = algo
+        .schedule_within(updates as u64)
+        .build(&spec, &devices, 0);
     let batch = random_batch(&spec, batch_size, 1);
     let threads = threads.unwrap_or(algo.info().learner_threads);
     let pool = crate::train::learner_pool(threads)?;
     let seconds = pool.install(|| {
         // One environment step per update, as training's default: work an agent schedules by
-        // environment steps (VDPO's cloning stage) runs on its schedule and is in the mean.
+        // environment steps (VDPO's cloning stage) runs on its schedule, brought within the
+        // timed updates in the same amount per step, and is in the mean.
         // The statistics stay on the device, as in training; downloading the last update's
         // waits for the device to finish the work queued (a GPU runs ahead of the host).
         let mut update =

@@ -325,6 +325,14 @@ pub trait AlgoConfig:
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
         self.build_stack(spec, devices, &[seed])
     }
+    /// This configuration with the work it schedules by environment steps (VDPO's cloning
+    /// stages) brought within `updates` updates at one update per step, in the same amount per
+    /// update, so that timing that many updates counts it (`dhrl bench update`, the cost
+    /// estimate of `dhrl sweep plan`). An algorithm that schedules nothing is itself.
+    fn schedule_within(&self, updates: u64) -> Self {
+        let _ = updates;
+        self.clone()
+    }
 }
 
 /// The TOML value of a field's default, for `--help-config`.

@@ -102,6 +102,8 @@ pub trait AnyConfig: Send + Sync {
     /// The runs of `seeds` as one agent.
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent>;
     fn boxed_clone(&self) -> Box<dyn AnyConfig>;
+    /// [`AlgoConfig::schedule_within`].
+    fn schedule_within(&self, updates: u64) -> Box<dyn AnyConfig>;
 }
 
 impl<C: AlgoConfig> AnyConfig for C {
@@ -126,6 +128,10 @@ impl<C: AlgoConfig> AnyConfig for C {
 
     fn boxed_clone(&self) -> Box<dyn AnyConfig> {
         Box::new(self.clone())
+    }
+
+    fn schedule_within(&self, updates: u64) -> Box<dyn AnyConfig> {
+        Box::new(AlgoConfig::schedule_within(self, updates))
     }
 }
 

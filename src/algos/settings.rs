@@ -69,6 +69,14 @@ impl AlgoSettings {
         Ok(())
     }
 
+    /// These settings with their environment-step schedule within `updates` updates
+    /// ([`crate::algos::AlgoConfig::schedule_within`]).
+    pub fn schedule_within(&self, updates: u64) -> AlgoSettings {
+        AlgoSettings {
+            config: self.config.schedule_within(updates),
+        }
+    }
+
     /// The agent, for tasks of `spec`'s sizes, seeded with `seed`.
     pub fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
         self.config.build(spec, devices, seed)

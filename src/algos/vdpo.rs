@@ -173,6 +173,22 @@ impl AlgoConfig for Config {
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
         Box::new(Vdpo::new(self, spec, devices, seeds))
     }
+
+    /// A cloning stage every `updates` steps at most, of as many head steps per environment
+    /// step as configured (rounded, at least one): 1,000 every 1,000 steps timed over 5 updates
+    /// is 5 every 5.
+    fn schedule_within(&self, updates: u64) -> Config {
+        let updates = updates.max(1);
+        if self.bc_every <= updates {
+            return self.clone();
+        }
+        let per_step = self.bc_updates as f64 / self.bc_every as f64;
+        Config {
+            bc_every: updates,
+            bc_updates: ((per_step * updates as f64).round() as u64).max(1),
+            ..self.clone()
+        }
+    }
 }
 
 /// Token positions' embeddings, `[S, Δ, width]` (burn's `Embedding` of Δ entries per run).
@@ -895,6 +911,48 @@ mod tests {
             ..Config::default()
         };
         (Vdpo::new(&config, &spec, &devices, &[4]), spec)
+    }
+
+    /// Timing a few updates (`dhrl bench update`, `sweep plan`'s cost) brings the cloning
+    /// stage within them with as many head steps per environment step as configured, and the
+    /// agent built from it runs the stage there.
+    #[test]
+    fn a_schedule_within_a_few_updates_keeps_the_cloning_per_step() {
+        let within = |bc_every, bc_updates, updates| {
+            let config = Config {
+                bc_every,
+                bc_updates,
+                ..Config::default()
+            }
+            .schedule_within(updates);
+            (config.bc_every, config.bc_updates)
+        };
+        assert_eq!(within(1000, 1000, 5), (5, 5));
+        assert_eq!(within(500, 2000, 10), (10, 40));
+        assert_eq!(within(1000, 100, 3), (3, 1), "rounded, at least one");
+        assert_eq!(within(4, 7, 10), (4, 7), "already within: unchanged");
+
+        let (_, spec) = small_agent(1);
+        let config = Config {
+            belief_width: 8,
+            belief_blocks: 1,
+            belief_heads: 2,
+            ..Config::default()
+        }
+        .schedule_within(3);
+        let devices = Devices::new(LearnDevice::Cpu).unwrap();
+        let mut agent = Vdpo::new(&config, &spec, &devices, &[4]);
+        let batch = random_batch(&spec, 4, 2);
+        // As the bench: an untimed update at step 0, then one update per environment step.
+        let staged: Vec<bool> = (0..=3u64)
+            .map(|k| {
+                let stats = agent
+                    .update(&mut UpdateContext::fixed(&batch, k, k))
+                    .unwrap();
+                stats.names().contains(&BC_STATS[1])
+            })
+            .collect();
+        assert_eq!(staged, [false, false, false, true]);
     }
 
     /// Two augmented states that differ only in their last action `a_{t−1}`.

@@ -33,7 +33,8 @@ pub struct BenchUpdateArgs {
     batch_size: usize,
     #[arg(long, value_enum, default_value_t = LearnDevice::Cpu)]
     device: LearnDevice,
-    /// Updates to time.
+    /// Updates to time, one environment step each; work scheduled by environment steps
+    /// (VDPO's cloning stages) is brought within them in the same amount per step.
     #[arg(long, default_value_t = 200)]
     updates: usize,
     /// Rayon threads for the updates (default: the algorithm's learner count, as in training).
