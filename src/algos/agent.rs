@@ -329,8 +329,7 @@ pub trait AlgoConfig:
     /// stages) brought within `updates` updates at one update per step, in the same amount per
     /// update, so that timing that many updates counts it (`dhrl bench update`, the cost
     /// estimate of `dhrl sweep plan`). An algorithm that schedules nothing is itself.
-    fn schedule_within(&self, updates: u64) -> Self {
-        let _ = updates;
+    fn schedule_within(&self, _updates: u64) -> Self {
         self.clone()
     }
 }
