@@ -1,8 +1,10 @@
-//! Throughput of the batched simulator against the anchor it is measured by: a plain
-//! single-thread loop of raw `mj_step` calls on one copy, in the same process.
+//! Throughput of the batched simulator against the anchors it is measured by, in the same
+//! process: a plain single-thread loop of raw `mj_step` calls on one copy, the same loop over
+//! all the batch's copies, and as many such loops at once as the batch has threads.
+use std::sync::Arc;
 use std::time::Instant;
 
-use mujoco_rs::prelude::MjData;
+use mujoco_rs::prelude::{MjData, MjModel};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -40,42 +42,103 @@ impl ActionTable {
 }
 
 /// Environment steps per second of `copies` copies stepped in turn by bare `mj_step` calls on
-/// this thread: random controls, `frame_skip` substeps per environment step, `mj_resetData`
+/// this thread: random controls, `frame_skip` substeps per environment step, a reset to `qpos0`
 /// when the task terminates or hits the time limit (so the states visited match the batched
-/// run's), and nothing else: no observation, reward, `mj_rnePostConstraint` or copying. One copy
+/// run's; written as dhrl's copies write it, [`TaskModel::reset_data`]), and nothing else: no observation, reward, `mj_rnePostConstraint` or copying. One copy
 /// stays hot in the core's caches; many copies (a batch's worth) do not, as in a batch.
 pub fn raw_mj_step_rate(task: TaskName, copies: usize, env_steps: usize) -> Result<f64, SimError> {
-    let model = TaskModel::load(task)?;
-    let def = model.task;
-    let copies = copies.max(1);
-    let actions = ActionTable::uniform(&model.action_low, &model.action_high, copies, 64, 7);
-    let mut data: Vec<MjData<_>> = (0..copies)
-        .map(|_| MjData::new(model.model.clone()))
-        .collect();
-    let mut elapsed = vec![0; copies];
-    let act = model.action_low.len();
-    let start = Instant::now();
-    for step in 0..env_steps {
-        let (i, round) = (step % copies, step / copies);
-        let d = &mut data[i];
-        for (c, &a) in d
-            .ctrl_mut()
-            .iter_mut()
-            .zip(&actions.row(round)[i * act..(i + 1) * act])
-        {
-            *c = a as f64;
-        }
-        for _ in 0..def.frame_skip {
-            d.step();
-        }
-        elapsed[i] += 1;
-        if (def.terminated)(d) || elapsed[i] >= MAX_EPISODE_STEPS {
-            d.reset();
-            d.forward();
-            elapsed[i] = 0;
-        }
+    let seconds = RawLoop::new(task, copies)?.run(env_steps);
+    Ok(env_steps as f64 / seconds)
+}
+
+/// Environment steps per second of `threads` such bare loops at once, each on an OS thread of
+/// its own over its own share of `copies` (`env_steps` steps in all), started together and
+/// never synchronised: what a batch on `threads` threads would reach on this machine if
+/// stepping it cost nothing but `mj_step`, cores slowing each other down included (all steps
+/// over the last loop's time).
+pub fn raw_parallel_rate(
+    task: TaskName,
+    copies: usize,
+    threads: usize,
+    env_steps: usize,
+) -> Result<f64, SimError> {
+    let threads = threads.clamp(1, copies.max(1));
+    let per_thread = env_steps.div_ceil(threads);
+    let start = std::sync::Barrier::new(threads);
+    let seconds = std::thread::scope(|scope| {
+        let loops: Vec<_> = (0..threads)
+            .map(|t| {
+                let start = &start;
+                // Copies dealt out as a batch deals them: the first `copies % threads` loops
+                // get one more.
+                let share = copies / threads + usize::from(t < copies % threads);
+                scope.spawn(move || {
+                    crate::float_mode::apply_to_this_thread();
+                    let raw = RawLoop::new(task, share);
+                    start.wait();
+                    raw.map(|mut raw| raw.run(per_thread))
+                })
+            })
+            .collect();
+        loops
+            .into_iter()
+            .map(|handle| handle.join().expect("a raw mj_step loop panicked"))
+            .try_fold(0.0f64, |slowest, seconds| Ok(slowest.max(seconds?)))
+    })?;
+    Ok((per_thread * threads) as f64 / seconds)
+}
+
+/// The bare loop of [`raw_mj_step_rate`]: its copies and their pre-drawn controls.
+struct RawLoop {
+    model: Arc<TaskModel>,
+    data: Vec<MjData<Arc<MjModel>>>,
+    actions: ActionTable,
+}
+
+impl RawLoop {
+    fn new(task: TaskName, copies: usize) -> Result<RawLoop, SimError> {
+        let model = TaskModel::load(task)?;
+        let copies = copies.max(1);
+        let actions = ActionTable::uniform(&model.action_low, &model.action_high, copies, 64, 7);
+        let data = (0..copies)
+            .map(|_| MjData::new(model.model.clone()))
+            .collect();
+        Ok(RawLoop {
+            model,
+            data,
+            actions,
+        })
     }
-    Ok(env_steps as f64 / start.elapsed().as_secs_f64())
+
+    /// Steps the copies in turn `env_steps` times; the seconds it took.
+    fn run(&mut self, env_steps: usize) -> f64 {
+        let def = self.model.task;
+        let copies = self.data.len();
+        let act = self.model.action_low.len();
+        let mut elapsed = vec![0; copies];
+        let start = Instant::now();
+        for step in 0..env_steps {
+            let (i, round) = (step % copies, step / copies);
+            let d = &mut self.data[i];
+            for (c, &a) in d
+                .ctrl_mut()
+                .iter_mut()
+                .zip(&self.actions.row(round)[i * act..(i + 1) * act])
+            {
+                *c = a as f64;
+            }
+            for _ in 0..def.frame_skip {
+                d.step();
+            }
+            elapsed[i] += 1;
+            if (def.terminated)(d) || elapsed[i] >= MAX_EPISODE_STEPS {
+                self.model.reset_data(d);
+                d.forward();
+                elapsed[i] = 0;
+            }
+        }
+        start.elapsed().as_secs_f64()
+    }
 }
 
 /// The machine a measurement ran on: every `dhrl bench` report names it.
@@ -158,6 +221,12 @@ pub struct EnvBenchReport {
     pub raw_batch_env_steps_per_sec: f64,
     /// `env_steps_per_sec / raw_batch_env_steps_per_sec`.
     pub ratio_to_raw_batch: f64,
+    /// The machine's ceiling for the batch: `threads` bare loops at once, each over its own
+    /// share of the `envs` copies ([`raw_parallel_rate`]).
+    pub raw_parallel_env_steps_per_sec: f64,
+    /// `env_steps_per_sec / raw_parallel_env_steps_per_sec`: what dhrl's batching, delay
+    /// layer and synchronisation leave of the ceiling.
+    pub ratio_to_raw_parallel: f64,
     pub episodes_finished: u64,
     #[serde(flatten)]
     pub machine: Machine,
@@ -165,8 +234,8 @@ pub struct EnvBenchReport {
 
 /// Steps a batch of `envs` copies (under delay `delay` when above 0) `steps` times with random
 /// actions, then times the raw single-thread `mj_step` loops (one copy, and `envs` copies) over
-/// one thread's share of those environment steps (at least 1,000), so every side runs for
-/// about as long.
+/// one thread's share of those environment steps (at least 1,000), and `threads` raw loops at
+/// once over as many steps each, so every side runs for about as long.
 pub fn bench_env(
     task: TaskName,
     envs: usize,
@@ -214,6 +283,8 @@ pub fn bench_env(
     let raw_steps = (envs * steps / threads).max(1000);
     let raw_env_steps_per_sec = raw_mj_step_rate(task, 1, raw_steps)?;
     let raw_batch_env_steps_per_sec = raw_mj_step_rate(task, envs, raw_steps)?;
+    let raw_parallel_env_steps_per_sec =
+        raw_parallel_rate(task, envs, threads, raw_steps * threads)?;
     Ok(EnvBenchReport {
         task,
         envs,
@@ -225,6 +296,8 @@ pub fn bench_env(
         ratio: env_steps_per_sec / raw_env_steps_per_sec,
         raw_batch_env_steps_per_sec,
         ratio_to_raw_batch: env_steps_per_sec / raw_batch_env_steps_per_sec,
+        raw_parallel_env_steps_per_sec,
+        ratio_to_raw_parallel: env_steps_per_sec / raw_parallel_env_steps_per_sec,
         episodes_finished,
         machine: Machine::here(),
     })

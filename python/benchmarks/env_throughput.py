@@ -6,8 +6,11 @@ resets included; every vector step counts ``num_envs`` environment steps.
 
 Beside them, in the same process, the two anchors of dhrl's own path: the same batch stepped
 inside the library with nothing built for Python ("Rust", ``Batch.time_native_steps``), and
-one copy stepped by bare ``mj_step`` calls on one thread ("raw", hot in cache; the physical
-limit of a batch is about the thread count times it). "Rust" and dhrl at Δ are measured in
+one copy stepped by bare ``mj_step`` calls on one thread ("raw", hot in cache), and the
+machine's ceiling for the batch: as many such bare loops at once as dhrl has threads, each on
+a thread of its own over its share of the copies, never synchronised ("ceiling": the thread
+count times "raw" on an ideal machine; less where the copies do not fit in a core's caches or
+the cores slow each other down). "Rust" and dhrl at Δ are measured in
 alternating slices (six each, twice ``--seconds`` in all), so that their ratio, the cost of the
 Python path, does not take in the machine's drift between two separate windows.
 
@@ -129,6 +132,20 @@ def bench_raw(gym_id: str, seconds: float) -> float:
         steps *= 2
 
 
+def bench_ceiling(gym_id: str, num_envs: int, threads: int, seconds: float) -> float:
+    """``threads`` bare ``mj_step`` loops at once, each over its share of ``num_envs`` copies."""
+    import dhrl
+    from dhrl import _dhrl
+
+    task = dhrl.task_name(gym_id)
+    steps = 1000 * threads
+    while True:
+        rate = _dhrl.raw_mj_step_rate(task, num_envs, steps, threads)
+        if steps / rate >= seconds:
+            return rate
+        steps *= 2
+
+
 def bench_gymnasium(gym_id: str, num_envs: int, delay: int, kind: str, actions, seconds) -> float:
     import gymnasium as gym
     from gymnasium.wrappers import DelayObservation
@@ -202,10 +219,11 @@ def main(argv: list[str] | None = None) -> int:
 
     delay = args.delay
     header = (
-        f"| task | copies | raw mj_step (1 copy, 1 thread) | dhrl Rust Δ={delay} | dhrl Δ=0 | dhrl Δ={delay} "
+        f"| task | copies | raw mj_step (1 copy, 1 thread) | ceiling ({args.threads} raw loops) "
+        f"| dhrl Rust Δ={delay} | dhrl Δ=0 | dhrl Δ={delay} "
         f"| Gymnasium Sync Δ={delay} | Gymnasium Async Δ={delay} | EnvPool Δ=0 "
-        f"| Python / Rust (Δ={delay}) | Rust / raw | dhrl Δ={delay} / best Gymnasium | dhrl / EnvPool (Δ=0) "
-        f"| Δ={delay} / Δ=0 |"
+        f"| Python / Rust (Δ={delay}) | Rust / raw | ceiling / raw | Rust / ceiling "
+        f"| dhrl Δ={delay} / best Gymnasium | dhrl / EnvPool (Δ=0) | Δ={delay} / Δ=0 |"
     )
     if not args.json:
         print(
@@ -213,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{os.cpu_count()} cores"
         )
         print(header)
-        print("|" + "---|" * 14)
+        print("|" + "---|" * 17)
     for task in tasks:
         gym_id = dhrl.TASKS.get(task, task)
         for n in sizes:
@@ -226,6 +244,7 @@ def main(argv: list[str] | None = None) -> int:
                 "task": gym_id,
                 "copies": n,
                 "raw": bench_raw(gym_id, args.seconds),
+                "ceiling": bench_ceiling(gym_id, n, args.threads, args.seconds),
                 "dhrl_native_delayed": native,
                 "dhrl_delayed": python,
                 "dhrl_delay0": bench_dhrl(gym_id, n, 0, args.threads, actions, args.seconds),
@@ -245,11 +264,13 @@ def main(argv: list[str] | None = None) -> int:
                 print(json.dumps(row), flush=True)
             else:
                 print(
-                    f"| {gym_id} | {n} | {rate(row['raw'])} | {rate(row['dhrl_native_delayed'])} "
+                    f"| {gym_id} | {n} | {rate(row['raw'])} | {rate(row['ceiling'])} "
+                    f"| {rate(row['dhrl_native_delayed'])} "
                     f"| {rate(row['dhrl_delay0'])} | {rate(row['dhrl_delayed'])} "
                     f"| {rate(row['gym_sync'])} | {rate(row['gym_async'])} | {rate(row['envpool_delay0'])} "
                     f"| {ratio(row['dhrl_delayed'], row['dhrl_native_delayed'])} "
                     f"| {ratio(row['dhrl_native_delayed'], row['raw'])} "
+                    f"| {ratio(row['ceiling'], row['raw'])} | {ratio(row['dhrl_native_delayed'], row['ceiling'])} "
                     f"| {ratio(row['dhrl_delayed'], best_gym)} | {ratio(row['dhrl_delay0'], row['envpool_delay0'])} "
                     f"| {ratio(row['dhrl_delayed'], row['dhrl_delay0'])} |",
                     flush=True,

@@ -133,9 +133,12 @@ class Batch:
         """One step of every copy. ``actions``: C-contiguous ``[N, act_dim]`` float32, all finite;
         ``controls``: ``[N]`` uint8 (0 step, 1 hold, 2 restart), every copy stepping when None."""
 
-def raw_mj_step_rate(task: str, copies: int, env_steps: int) -> float:
+def raw_mj_step_rate(task: str, copies: int, env_steps: int, threads: int = 1) -> float:
     """Environment steps per second of ``copies`` copies of ``task`` stepped in turn by bare
-    ``mj_step`` calls on this thread."""
+    ``mj_step`` calls on this thread; with ``threads`` above 1, that many such loops at once on
+    threads of their own, each over its share of the copies (at most one loop per copy), all
+    ``env_steps`` over the last loop's time: the machine's ceiling for a batch on that many
+    threads."""
 
 def set_assets_dir(path: str) -> None:
     """Reads the task XMLs from ``path`` from now on (``import dhrl`` points it at the installed

@@ -425,13 +425,32 @@ fn stepped<'py>(py: Python<'py>, core: &Core) -> PyResult<Bound<'py, PyDict>> {
 }
 
 /// Environment steps per second of `copies` copies of `task` stepped in turn by bare `mj_step`
-/// calls on this thread (the anchor of `dhrl bench env`).
+/// calls on this thread (the anchor of `dhrl bench env`); with `threads` above 1, that many such
+/// loops at once on threads of their own, each over its share of the copies (the machine's
+/// ceiling for a batch on that many threads).
 #[pyfunction]
-fn raw_mj_step_rate(py: Python<'_>, task: &str, copies: usize, env_steps: usize) -> PyResult<f64> {
+#[pyo3(signature = (task, copies, env_steps, threads = 1))]
+fn raw_mj_step_rate(
+    py: Python<'_>,
+    task: &str,
+    copies: usize,
+    env_steps: usize,
+    threads: usize,
+) -> PyResult<f64> {
     let task = TaskName::from_str(task).map_err(value_error)?;
+    if threads == 0 {
+        return Err(PyValueError::new_err(
+            "threads must be ≥ 1 (1: this thread; more: that many loops at once); got 0",
+        ));
+    }
     py.detach(|| {
         let _mode = FlushGuard::new();
-        dhrl::bench::raw_mj_step_rate(task, copies, env_steps).map_err(value_error)
+        if threads == 1 {
+            dhrl::bench::raw_mj_step_rate(task, copies, env_steps)
+        } else {
+            dhrl::bench::raw_parallel_rate(task, copies, threads, env_steps)
+        }
+        .map_err(value_error)
     })
 }
 

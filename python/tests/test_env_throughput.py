@@ -22,7 +22,7 @@ def run_script(*args: str) -> subprocess.CompletedProcess:
 
 def test_json_rows_hold_every_measured_cell():
     done = run_script(
-        "--tasks", "InvertedPendulum-v4", "--envs", "1,3", "--delay", "2", "--threads", "1",
+        "--tasks", "InvertedPendulum-v4", "--envs", "1,3", "--delay", "2", "--threads", "2",
         "--seconds", "0.05", "--async-max", "1", "--json",
     )
     assert done.returncode == 0, done.stderr
@@ -32,9 +32,9 @@ def test_json_rows_hold_every_measured_cell():
         ("InvertedPendulum-v4", 3, 2),
     ]
     for row in rows:
-        for cell in ("raw", "dhrl_native_delayed", "dhrl_delay0", "dhrl_delayed", "gym_sync"):
+        for cell in ("raw", "ceiling", "dhrl_native_delayed", "dhrl_delay0", "dhrl_delayed", "gym_sync"):
             assert row[cell] > 0, (cell, row)
-        assert row["cpu"] and row["threads"] == 1
+        assert row["cpu"] and row["threads"] == 2
     assert rows[0]["gym_async"] > 0
     assert rows[1]["gym_async"] is None, "above --async-max AsyncVectorEnv is not run"
 

@@ -62,6 +62,15 @@ def test_bad_actions_leave_the_env_working():
     env.step(np.zeros((3, 3), int))
 
 
+def test_the_raw_anchor_takes_one_thread_or_more():
+    from dhrl import _dhrl
+
+    with pytest.raises(ValueError, match="threads must be ≥ 1 .*; got 0"):
+        _dhrl.raw_mj_step_rate("hopper", 4, 10, 0)
+    with pytest.raises(ValueError, match="unknown task"):
+        _dhrl.raw_mj_step_rate("cartpole", 4, 10, 2)
+
+
 def test_bad_reset_arguments():
     env = dhrl.make_vec("hopper", 2)
     with pytest.raises(TypeError, match="one integer for the whole batch"):

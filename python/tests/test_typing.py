@@ -143,6 +143,7 @@ def test_returned_dicts_and_values_match_the_stub(stub):
     assert isinstance(batch.workers_flush_subnormals(), list)
     assert isinstance(batch.time_native_steps(np.zeros((1, 2, 3), np.float32), 2), float)
     assert isinstance(_dhrl.raw_mj_step_rate("hopper", 1, 10), float)
+    assert isinstance(_dhrl.raw_mj_step_rate("hopper", 4, 40, threads=2), float)
     for getter in ("task", "gymnasium_id"):
         assert isinstance(getattr(batch, getter), str)
     for getter in ("num_envs", "obs_dim", "act_dim", "delay", "augmented_dim", "num_threads"):

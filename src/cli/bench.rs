@@ -205,7 +205,7 @@ fn run_bench_env(args: &BenchEnvArgs) -> anyhow::Result<()> {
     } else {
         println!("{}", report.machine);
         println!(
-            "{:<18} {:>6} {:>7} {:>5} {:>12} {:>16} {:>7} {:>20} {:>7}",
+            "{:<18} {:>6} {:>7} {:>5} {:>12} {:>16} {:>7} {:>20} {:>7} {:>26} {:>7}",
             "task",
             "envs",
             "threads",
@@ -214,10 +214,12 @@ fn run_bench_env(args: &BenchEnvArgs) -> anyhow::Result<()> {
             "raw, 1 copy",
             "ratio",
             "raw, all copies",
+            "ratio",
+            "raw, all copies, threads",
             "ratio"
         );
         println!(
-            "{:<18} {:>6} {:>7} {:>5} {:>12.0} {:>16.0} {:>7.2} {:>20.0} {:>7.2}",
+            "{:<18} {:>6} {:>7} {:>5} {:>12.0} {:>16.0} {:>7.2} {:>20.0} {:>7.2} {:>26.0} {:>7.2}",
             report.task.as_str(),
             report.envs,
             report.threads,
@@ -226,7 +228,9 @@ fn run_bench_env(args: &BenchEnvArgs) -> anyhow::Result<()> {
             report.raw_env_steps_per_sec,
             report.ratio,
             report.raw_batch_env_steps_per_sec,
-            report.ratio_to_raw_batch
+            report.ratio_to_raw_batch,
+            report.raw_parallel_env_steps_per_sec,
+            report.ratio_to_raw_parallel
         );
     }
     Ok(())

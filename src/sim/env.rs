@@ -5,6 +5,7 @@ use mujoco_rs::prelude::MjData;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use super::model::INTEGRATION_STATE;
 use super::{MAX_EPISODE_STEPS, SimError, TaskModel, check_vector};
 use crate::tasks::{Progress, ResetNoise, SimData};
 
@@ -50,8 +51,6 @@ pub struct EnvSnapshot {
     pub progress: f64,
 }
 
-const INTEGRATION_STATE: u32 = mujoco_rs::prelude::MjtState::mjSTATE_INTEGRATION as u32;
-
 impl Env {
     /// A copy in MuJoCo's initial state (`qpos0`, zero velocity), not yet reset with noise.
     pub fn new(model: Arc<TaskModel>) -> Env {
@@ -76,8 +75,16 @@ impl Env {
         self.elapsed
     }
 
-    /// `mj_resetData`, the task's reset noise on `qpos0` / zero `qvel`, then `mj_forward`.
+    /// Gymnasium's reset: `mj_resetData` ([`TaskModel::reset_data`], which writes what that
+    /// call leaves), the task's reset noise on `qpos0` / zero `qvel`, then `mj_forward`.
     pub fn reset(&mut self, rng: &mut impl Rng) {
+        let (qpos, qvel) = self.reset_noise(rng);
+        self.model.reset_data(&mut self.data);
+        self.write_state(&qpos, &qvel);
+    }
+
+    /// `qpos0` and zero `qvel` with the task's reset noise drawn from `rng`.
+    fn reset_noise(&self, rng: &mut impl Rng) -> (Vec<f64>, Vec<f64>) {
         let m = &self.model;
         let (qpos, qvel): (Vec<f64>, Vec<f64>) = match m.task.reset_noise {
             ResetNoise::Uniform { scale } => (
@@ -99,8 +106,7 @@ impl Env {
                     .collect(),
             ),
         };
-        self.data.reset();
-        self.write_state(&qpos, &qvel);
+        (qpos, qvel)
     }
 
     /// Gymnasium's `set_state`: copy `qpos`/`qvel` in, then `mj_forward`; restarts the time limit.
@@ -154,7 +160,8 @@ impl Env {
         (self.model.task.observe)(&self.data, out)
     }
 
-    /// `ctrl = action`, `mj_step` × frame_skip, `mj_rnePostConstraint`; writes the new
+    /// `ctrl = action`, `mj_step` × frame_skip, `mj_rnePostConstraint` where the observation
+    /// reads its forces ([`crate::tasks::TaskDef::observes_constraint_forces`]); writes the new
     /// observation into `obs`. The action is not clipped (MuJoCo clamps controls itself), and
     /// the control cost uses it as given, as in Gymnasium.
     pub fn step(&mut self, action: &[f64], obs: &mut [f64]) -> StepOutcome {
@@ -165,7 +172,9 @@ impl Env {
         for _ in 0..task.frame_skip {
             self.data.step();
         }
-        self.data.rne_post_constraint();
+        if task.observes_constraint_forces {
+            self.data.rne_post_constraint();
+        }
         self.progress = self.read_progress();
         self.observe(obs);
         self.elapsed += 1;
@@ -215,6 +224,86 @@ impl Env {
                     .sum();
                 weighted / m.total_mass
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+    use crate::tasks::TaskName;
+
+    /// dhrl's two shortcuts change nothing: a copy reset and stepped as dhrl does it, and its
+    /// twin reset and stepped as Gymnasium v4 does (`mj_resetData` before the reset state is
+    /// written; `mj_rnePostConstraint` after every step, then the observation), stay
+    /// bit-identical in physics state, observation, reward and flags over episodes of random
+    /// actions on every task, and the flag that leaves `mj_rnePostConstraint` out is set
+    /// exactly where the observation reads `cfrc_ext`.
+    #[test]
+    fn resets_and_steps_match_gymnasiums_sequence_bit_for_bit() {
+        for task in TaskName::ALL {
+            let model = TaskModel::load(task).unwrap();
+            let (low, high) = (model.action_low.clone(), model.action_high.clone());
+            let obs_dim = task.def().obs_dim;
+            let (mut ours, mut gymnasium) = (Env::new(model.clone()), Env::new(model));
+            let mut rng = ChaCha8Rng::seed_from_u64(5);
+            let (mut obs, mut gym_obs) = (vec![0.0; obs_dim], vec![0.0; obs_dim]);
+            let (mut episodes, mut ended) = (0, true);
+            // Past HalfCheetah's time limit, and past a few terminations elsewhere.
+            for step in 0..1_100 {
+                if ended {
+                    let (qpos, qvel) = gymnasium.reset_noise(&mut rng.clone());
+                    gymnasium.data.reset();
+                    gymnasium.write_state(&qpos, &qvel);
+                    ours.reset(&mut rng);
+                    episodes += 1;
+                    ours.observe(&mut obs);
+                    gymnasium.observe(&mut gym_obs);
+                    assert_bits_equal(&obs, &gym_obs, &format!("{task} reset {episodes}"));
+                }
+                let action: Vec<f64> = low
+                    .iter()
+                    .zip(&high)
+                    .map(|(&l, &h)| rng.random_range(l..h))
+                    .collect();
+                let outcome = ours.step(&action, &mut obs);
+                let gym_outcome = gymnasium.step(&action, &mut gym_obs);
+                gymnasium.data.rne_post_constraint();
+                gymnasium.observe(&mut gym_obs);
+                let at = format!("{task} step {step}");
+                assert_eq!(outcome, gym_outcome, "{at}");
+                assert_bits_equal(&obs, &gym_obs, &at);
+                assert_eq!(
+                    ours.snapshot().physics,
+                    gymnasium.snapshot().physics,
+                    "{at}"
+                );
+                ended = outcome.terminated || outcome.truncated;
+            }
+            assert!(episodes > 1, "{task}: no episode ended");
+            // The flag is right: only an observation of constraint forces changes with them.
+            ours.observe(&mut obs);
+            for force in ours.data.cfrc_ext_mut().as_flattened_mut() {
+                *force += 1.0;
+            }
+            ours.observe(&mut gym_obs);
+            assert_eq!(
+                obs != gym_obs,
+                task.def().observes_constraint_forces,
+                "{task}: whether its observation reads cfrc_ext"
+            );
+        }
+    }
+
+    fn assert_bits_equal(ours: &[f64], gymnasium: &[f64], at: &str) {
+        if let Some(i) = (0..ours.len()).find(|&i| ours[i].to_bits() != gymnasium[i].to_bits()) {
+            panic!(
+                "{at}: obs[{i}] is {} here, {} in Gymnasium's sequence",
+                ours[i], gymnasium[i]
+            );
         }
     }
 }

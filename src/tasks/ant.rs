@@ -13,6 +13,7 @@ pub static ANT: TaskDef = TaskDef {
     healthy_reward: 1.0,
     ctrl_cost_weight: 0.5,
     observe,
+    observes_constraint_forces: false,
     terminated,
 };
 

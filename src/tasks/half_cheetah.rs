@@ -13,6 +13,7 @@ pub static HALF_CHEETAH: TaskDef = TaskDef {
     healthy_reward: 0.0,
     ctrl_cost_weight: 0.1,
     observe,
+    observes_constraint_forces: false,
     terminated: |_| false,
 };
 

@@ -13,6 +13,7 @@ pub static HUMANOID: TaskDef = TaskDef {
     healthy_reward: 5.0,
     ctrl_cost_weight: 0.1,
     observe,
+    observes_constraint_forces: true,
     terminated,
 };
 

@@ -13,6 +13,7 @@ pub static INVERTED_PENDULUM: TaskDef = TaskDef {
     healthy_reward: 1.0,
     ctrl_cost_weight: 0.0,
     observe,
+    observes_constraint_forces: false,
     terminated,
 };
 

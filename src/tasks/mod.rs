@@ -58,6 +58,12 @@ pub struct TaskDef {
     pub ctrl_cost_weight: f64,
     /// Writes the observation of the current state into `out` (`obs_dim` long).
     pub observe: fn(&SimData, &mut [f64]),
+    /// Whether `observe` reads the forces `mj_rnePostConstraint` computes after a step
+    /// (`cfrc_ext`). Gymnasium v4 calls it after every step, but nothing else reads what it
+    /// writes (`cacc`, `cfrc_int`, `cfrc_ext` are outputs, never the next step's inputs), so
+    /// a task whose observation does not read them leaves it out: the same observations,
+    /// rewards and flags, without its cost.
+    pub observes_constraint_forces: bool,
     /// Whether the current state ends the episode (the MDP's terminal condition).
     pub terminated: fn(&SimData) -> bool,
 }

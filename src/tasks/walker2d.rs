@@ -15,6 +15,7 @@ pub static WALKER2D: TaskDef = TaskDef {
     healthy_reward: 1.0,
     ctrl_cost_weight: 1e-3,
     observe: observe_planar_walker,
+    observes_constraint_forces: false,
     terminated,
 };
 
