@@ -131,27 +131,40 @@ impl DelayedBatch {
 
     /// Steps the simulator with `actions`, then the delay layer with what it returned.
     pub fn step(&mut self, actions: &[f32]) -> Result<(), BatchError> {
-        self.env.step(actions)?;
-        self.step_layer(actions)
+        self.on_simulation_threads(|batch| {
+            batch.env.step(actions)?;
+            batch.step_layer(actions)
+        })
     }
 
     /// [`DelayedBatch::step`] with copy `i` doing what `controls[i]` says: held copies stay
     /// as they are (simulation and delay layer alike), restarted ones begin a new episode.
     pub fn step_each(&mut self, actions: &[f32], controls: &[CopyStep]) -> Result<(), BatchError> {
-        self.env.step_each(actions, controls)?;
-        self.step_layer(actions)
+        self.on_simulation_threads(|batch| {
+            batch.env.step_each(actions, controls)?;
+            batch.step_layer(actions)
+        })
     }
 
-    /// The delay layer's step on the simulation's own threads, still awake from its step (the
-    /// CPU layer splits large batches across the current pool).
+    /// Runs `f` on the simulation's pool in one hand-off, so that the simulation's parallel
+    /// pass and the delay layer's (the CPU layer splits large batches across the current
+    /// pool) follow each other on threads still awake, without returning to the calling thread
+    /// in between: each return and hand-off wakes a sleeping thread.
+    fn on_simulation_threads<R: Send>(
+        &mut self,
+        f: impl FnOnce(&mut DelayedBatch) -> R + Send,
+    ) -> R {
+        if self.env.threads() > 1 {
+            let pool = self.env.pool();
+            pool.install(|| f(self))
+        } else {
+            f(self)
+        }
+    }
+
     fn step_layer(&mut self, actions: &[f32]) -> Result<(), BatchError> {
         let input = StepInput::from_env(&self.env, actions);
-        let layer = &mut self.layer;
-        if self.env.threads() > 1 {
-            self.env.install(|| layer.step(&input))?;
-        } else {
-            layer.step(&input)?;
-        }
+        self.layer.step(&input)?;
         Ok(())
     }
 }

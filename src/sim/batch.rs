@@ -65,7 +65,7 @@ struct CopyOutputs<'a> {
 pub struct BatchedEnv {
     model: Arc<TaskModel>,
     copies: Vec<EnvCopy>,
-    pool: rayon::ThreadPool,
+    pool: Arc<rayon::ThreadPool>,
     actuator_noise: Option<Normal<f64>>,
     observations: Vec<f32>,
     final_observations: Vec<f32>,
@@ -189,6 +189,7 @@ impl BatchedEnv {
                 message: e.to_string(),
             }
         })?;
+        let pool = Arc::new(pool);
         let (n, obs_dim) = (config.envs, model.task.obs_dim);
         let copies = (0..n)
             .map(|i| {
@@ -409,10 +410,10 @@ impl BatchedEnv {
     pub fn threads(&self) -> usize {
         self.pool.current_num_threads()
     }
-    /// Runs `f` on the copies' threads: parallel work that goes with a step (the delay layer)
-    /// uses them rather than another pool.
-    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
-        self.pool.install(f)
+    /// The pool that steps the copies: parallel work that goes with a step (the delay layer)
+    /// runs on it, in the same hand-off, rather than on another pool.
+    pub fn pool(&self) -> Arc<rayon::ThreadPool> {
+        self.pool.clone()
     }
     /// Per worker thread, whether it flushes subnormal floats ([`crate::float_mode`]): a
     /// subnormal product computed there comes out as zero.
