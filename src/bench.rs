@@ -43,9 +43,10 @@ impl ActionTable {
 
 /// Environment steps per second of `copies` copies stepped in turn by bare `mj_step` calls on
 /// this thread: random controls, `frame_skip` substeps per environment step, a reset to `qpos0`
-/// when the task terminates or hits the time limit (so the states visited match the batched
-/// run's; written as dhrl's copies write it, [`TaskModel::reset_data`]), and nothing else: no observation, reward, `mj_rnePostConstraint` or copying. One copy
-/// stays hot in the core's caches; many copies (a batch's worth) do not, as in a batch.
+/// when the task terminates or hits the time limit (so the copies go through episodes as a
+/// batch's do, without its reset noise; written as dhrl writes it, [`TaskModel::reset_data`]),
+/// and nothing else: no observation, reward, `mj_rnePostConstraint` or copying. One copy stays
+/// hot in the core's caches; many copies (a batch's worth) do not, as in a batch.
 pub fn raw_mj_step_rate(task: TaskName, copies: usize, env_steps: usize) -> Result<f64, SimError> {
     let seconds = RawLoop::new(task, copies)?.run(env_steps);
     Ok(env_steps as f64 / seconds)
