@@ -4,7 +4,7 @@ beside what a Python user runs today, measured in the same run on this machine: 
 EnvPool at Δ = 0 when it is installed. Random actions, uniform in the task's action bounds,
 resets included; every vector step counts ``num_envs`` environment steps.
 
-Beside them, in the same process, the two anchors of dhrl's own path: the same batch stepped
+Beside them, in the same process, the anchors of dhrl's own path: the same batch stepped
 inside the library with nothing built for Python ("Rust", ``Batch.time_native_steps``), and
 one copy stepped by bare ``mj_step`` calls on one thread ("raw", hot in cache), and the
 machine's ceiling for the batch: as many such bare loops at once as dhrl has threads, each on
