@@ -118,29 +118,16 @@ def bench_python_and_native(
             env.close()
 
 
-def bench_raw(gym_id: str, seconds: float) -> float:
-    """One copy, bare ``mj_step`` on this thread."""
-    import dhrl
-    from dhrl import _dhrl
-
-    task = dhrl.task_name(gym_id)
-    steps = 1000
-    while True:
-        rate = _dhrl.raw_mj_step_rate(task, 1, steps)
-        if steps / rate >= seconds:
-            return rate
-        steps *= 2
-
-
-def bench_ceiling(gym_id: str, num_envs: int, threads: int, seconds: float) -> float:
-    """``threads`` bare ``mj_step`` loops at once, each over its share of ``num_envs`` copies."""
+def bench_raw(gym_id: str, seconds: float, copies: int = 1, threads: int = 1) -> float:
+    """Bare ``mj_step`` loops over at least ``seconds``: one copy on this thread by default
+    ("raw"), or ``threads`` loops at once, each over its share of ``copies`` ("ceiling")."""
     import dhrl
     from dhrl import _dhrl
 
     task = dhrl.task_name(gym_id)
     steps = 1000 * threads
     while True:
-        rate = _dhrl.raw_mj_step_rate(task, num_envs, steps, threads)
+        rate = _dhrl.raw_mj_step_rate(task, copies, steps, threads)
         if steps / rate >= seconds:
             return rate
         steps *= 2
@@ -244,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
                 "task": gym_id,
                 "copies": n,
                 "raw": bench_raw(gym_id, args.seconds),
-                "ceiling": bench_ceiling(gym_id, n, args.threads, args.seconds),
+                "ceiling": bench_raw(gym_id, args.seconds, copies=n, threads=args.threads),
                 "dhrl_native_delayed": native,
                 "dhrl_delayed": python,
                 "dhrl_delay0": bench_dhrl(gym_id, n, 0, args.threads, actions, args.seconds),
