@@ -69,6 +69,17 @@ PyTorch is not part of dhrl's set-up: install it into the venv first,
 
 It prints one JSON line: both rates (updates per second, the cloning bursts averaged in) and
 the ratio dhrl / torch. `--torch-only` skips dhrl (when target/release/dhrl is not built).
+
+`--products` also measures what the update's matrix products alone cost on this core: it records
+one more `bc_every` period of PyTorch updates (one burst) with torch.profiler, counts the
+products' FLOPs (mm, addmm, bmm, baddbmm), then runs exactly those products again, back to back
+on operands of the recorded shapes (contiguous) and nothing else, best of five. So the same
+update cannot run faster than `products_ms` at this core's sgemm rate whatever the framework,
+and `torch_ms_per_update / products_ms` is the most any implementation of the same arithmetic
+could beat PyTorch by; `other_ms_at_1_5x` is what a 1.5× implementation may spend on everything
+that is not a product (layer norms, activations, softmax, dropout, losses, Adam, allocation),
+against PyTorch's `torch_other_ms` and dhrl's `dhrl_other_ms` (its total less the same products,
+at MKL's rate; dhrl's gemm runs at about that rate: docs/results/performance-xeon.md).
 """
 import argparse
 import json
@@ -79,6 +90,7 @@ import time
 
 import torch
 import torch.nn as nn
+from torch.profiler import ProfilerActivity, profile
 import torch.nn.functional as F
 
 # Observation size, action size and action bound (|a_j| ≤ bound) of dhrl's tasks.
@@ -283,6 +295,31 @@ def random_batch(n, obs, act, delay):
     }
 
 
+PRODUCTS = {"aten::mm": torch.mm, "aten::addmm": torch.addmm, "aten::bmm": torch.bmm,
+            "aten::baddbmm": torch.baddbmm}
+
+
+def products_alone(agent, batch, first_update, period):
+    """The matrix products of `period` more updates (from `first_update`): (GFLOP per update,
+    their best time per update run alone, back to back, on operands of the recorded shapes)."""
+    with profile(activities=[ProfilerActivity.CPU], record_shapes=True, with_flops=True) as recorded:
+        for k in range(first_update, first_update + period):
+            agent.update(batch, k, k)
+    calls = [(e.name, tuple(tuple(shape) for shape in e.input_shapes if shape), e.flops)
+             for e in recorded.events() if e.name in PRODUCTS]
+    operands = {}
+    for name, shapes, _ in calls:
+        operands.setdefault((name, shapes), [torch.randn(*shape) for shape in shapes])
+    sequence = [(PRODUCTS[name], operands[(name, shapes)]) for name, shapes, _ in calls]
+    best = math.inf
+    for _ in range(5):
+        start = time.perf_counter()
+        for product, arguments in sequence:
+            product(*arguments)
+        best = min(best, time.perf_counter() - start)
+    return sum(flops for _, _, flops in calls) / period / 1e9, 1e3 * best / period
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--task", default="half-cheetah", choices=sorted(TASKS))
@@ -313,6 +350,8 @@ def main():
                         help="turn off PyTorch's fused inference path for the cloning stage's transformer")
     parser.add_argument("--dhrl", default="target/release/dhrl")
     parser.add_argument("--torch-only", action="store_true", help="time PyTorch alone (no dhrl run)")
+    parser.add_argument("--products", action="store_true",
+                        help="also time the update's matrix products alone (one more bc_every period, recorded)")
     args = parser.parse_args()
     if args.updates is None:
         args.updates = args.bc_every
@@ -348,6 +387,14 @@ def main():
               "torch_updates_per_sec": round(torch_rate, 2),
               "torch_ms_per_update": round(1e3 * seconds / args.updates, 3),
               "torch_bc_share": round(agent.bc_seconds / seconds, 3)}
+    if args.products:
+        gflop, products_ms = products_alone(agent, batch, args.updates + 1, args.bc_every)
+        torch_ms = 1e3 * seconds / args.updates
+        report.update({"products_gflop_per_update": round(gflop, 3), "products_ms": round(products_ms, 2),
+                       "products_gflop_per_sec": round(gflop / products_ms * 1e3, 1),
+                       "torch_other_ms": round(torch_ms - products_ms, 2),
+                       "torch_over_products": round(torch_ms / products_ms, 3),
+                       "other_ms_at_1_5x": round(torch_ms / 1.5 - products_ms, 2)})
     if not args.torch_only:
         settings = {"critic_learning_rate": args.critic_lr, "learning_rate": args.actor_lr,
                     "temperature_learning_rate": args.temperature_lr, "actor_every": args.actor_every,
@@ -367,6 +414,8 @@ def main():
         report.update({"dhrl_updates_per_sec": round(dhrl["updates_per_sec"], 2),
                        "dhrl_ms_per_update": round(dhrl["ms_per_update"], 3),
                        "ratio": round(dhrl["updates_per_sec"] / torch_rate, 3)})
+        if args.products:
+            report["dhrl_other_ms"] = round(dhrl["ms_per_update"] - report["products_ms"], 2)
     print(json.dumps(report))
 
 

@@ -40,7 +40,7 @@ use burn::nn::transformer::{TransformerEncoder, TransformerEncoderConfig};
 use burn::nn::{EmbeddingConfig, LayerNormConfig};
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
-use burn::tensor::activation::{gelu, softmax};
+use burn::tensor::activation::softmax;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -53,8 +53,8 @@ use crate::acting::{ActingNetwork, BeliefTransformer, TransformerBlock};
 use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, StackedLayerNorm,
-    StackedLinear, TransitionTensors, adam, load_json_stack, load_optimizer_stack, load_stack,
-    select_runs, stack, stacked_rows, to_vec, upload,
+    StackedLinear, TransitionTensors, adam, gelu, load_json_stack, load_optimizer_stack,
+    load_stack, select_runs, stack, stacked_rows, to_vec, upload,
 };
 use crate::seeds;
 

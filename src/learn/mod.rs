@@ -4,6 +4,7 @@
 //! stacked ([`stack`]): one set of tensors serves S runs.
 
 mod device;
+mod gelu;
 mod io;
 mod losses;
 mod nets;
@@ -14,6 +15,7 @@ mod tensors;
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
 pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};
+pub use gelu::gelu;
 pub use io::{CheckpointDir, load_json_stack, load_optimizer_stack, load_stack};
 pub use losses::{
     actor_loss, batch_mean, critic_loss, critic_target, lifting_loss, polyak,
