@@ -3,8 +3,8 @@
 //! host-side noise so that runs are reproducible and resumable. The SAC family's networks are
 //! stacked ([`stack`]): one set of tensors serves S runs.
 
+mod cpu_ops;
 mod device;
-mod gelu;
 mod io;
 mod losses;
 mod nets;
@@ -12,10 +12,10 @@ mod noise;
 mod stack;
 mod tensors;
 
+pub use cpu_ops::gelu;
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
 pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};
-pub use gelu::gelu;
 pub use io::{CheckpointDir, load_json_stack, load_optimizer_stack, load_stack};
 pub use losses::{
     actor_loss, batch_mean, critic_loss, critic_target, lifting_loss, polyak,

@@ -13,7 +13,6 @@ use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::nn::{LayerNorm, Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Bytes;
-use burn::tensor::module::layer_norm;
 use burn_pack::{Reader, Writer};
 
 use super::tensors::to_vec;
@@ -93,26 +92,9 @@ impl StackedLayerNorm {
     }
 
     /// Normalises each run's `[…, width]` slice of `x` `[S, …, width]` over its last axis with
-    /// the run's scale and shift, through burn's fused kernel, one call per run on the run's
-    /// slice. A solo run (S = 1) takes the same slice and concatenation: the kernel's backward
-    /// on a slice of a tensor rounds otherwise than on the whole tensor, and a run must compute
-    /// the same numbers alone and in a stack.
+    /// the run's scale and shift ([`cpu_ops::layer_norm`](super::cpu_ops::layer_norm)).
     pub fn forward<const D: usize>(&self, x: Tensor<D>) -> Tensor<D> {
-        let [runs, width] = self.gamma.val().dims();
-        let part = |p: &Param<Tensor<2>>, run: usize| p.val().narrow(0, run, 1).reshape([width]);
-        Tensor::cat(
-            (0..runs)
-                .map(|run| {
-                    layer_norm(
-                        x.clone().narrow(0, run, 1),
-                        part(&self.gamma, run),
-                        Some(part(&self.beta, run)),
-                        Self::EPSILON,
-                    )
-                })
-                .collect(),
-            0,
-        )
+        super::cpu_ops::layer_norm(x, self.gamma.val(), self.beta.val(), Self::EPSILON)
     }
 
     /// Slice `slice`'s scale and shift as plain numbers (for export).

@@ -1,115 +1,64 @@
-//! GELU, `x·Φ(x) = x·(1 + erf(x/√2))/2`, and its derivative, vectorised on the CPU learner.
-//!
-//! burn-flex evaluates both with libm's scalar `erff`, which for |x| ≥ 0.84 takes a slow path
-//! through two `expf` calls: a tenth of a VDPO update once its transformer's pre-activations
-//! have grown (docs/results/performance-xeon.md). Here `erf` is PyTorch's own vectorised CPU
-//! form (Abramowitz & Stegun 7.1.26, absolute error ≤ 1.5e-7 in exact arithmetic, one `exp`),
-//! written branch-free in plain multiplies and adds (no fused multiply-add) so that every
-//! instruction set computes the same bits; the loops are compiled for AVX-512 and AVX2 and
-//! picked at run time. Tensors on other devices (wgpu) take burn's GELU.
+//! GELU, `x·Φ(x) = x·(1 + erf(x/√2))/2`, and its derivative. burn-flex evaluates both with
+//! libm's scalar `erff`, which for |x| ≥ 0.84 takes a slow path through two `expf` calls: a
+//! tenth of a VDPO update once its transformer's pre-activations have grown
+//! (docs/results/performance-xeon.md). Here `erf` is PyTorch's own vectorised CPU form
+//! (Abramowitz & Stegun 7.1.26, absolute error ≤ 1.5e-7 in exact arithmetic, one `exp`).
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
-use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind, unary};
+use burn::backend::autodiff::ops::{Backward, Ops, unary};
 use burn::backend::flex::FlexTensor;
-use burn::backend::tensor::FloatTensor;
-use burn::backend::{
-    Autodiff, AutodiffBackend, DispatchDevice, Flex, GradientCheckpointingStrategy,
-};
-use burn::prelude::{Tensor, TensorData};
-use burn::tensor::DType;
+use burn::backend::{Autodiff, Flex};
+use burn::prelude::Tensor;
 use burn::tensor::activation;
+
+use super::{Route, flex, on_graph, plain, route, tracked, values};
 
 /// `GELU(x)` elementwise, differentiable where `x` is.
 pub fn gelu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
-    let device = x.device();
-    let on_flex = matches!(
-        device.clone().inner().as_dispatch(),
-        DispatchDevice::Flex(_)
-    );
-    if !on_flex || x.dtype() != DType::F32 {
-        return activation::gelu(x);
-    }
-    match device.gradient_checkpointing_strategy() {
-        None => {
-            let input = x.try_into_primitive::<Flex>().expect("a Flex tensor");
-            Tensor::from_primitive::<Flex>(forward(input))
+    match route(&x) {
+        Route::Plain => Tensor::from_primitive::<Flex>(forward(plain(x))),
+        Route::Tracked => {
+            let output = on_graph(Gelu, [tracked(x)], |[x]| forward(x.clone()));
+            Tensor::from_primitive::<Autodiff<Flex>>(output)
         }
-        Some(GradientCheckpointingStrategy::Disabled) => {
-            let input = x
-                .try_into_primitive::<Autodiff<Flex>>()
-                .expect("an autodiff Flex tensor");
-            Tensor::from_primitive::<Autodiff<Flex>>(tracked(input))
-        }
-        Some(_) => activation::gelu(x),
+        Route::Burn => activation::gelu(x),
     }
 }
 
-/// The autodiff op: the forward pass keeps its input for the backward pass, which multiplies
-/// the incoming gradient by `Φ(x) + x·φ(x)`.
-fn tracked(input: FloatTensor<Autodiff<Flex>>) -> FloatTensor<Autodiff<Flex>> {
-    #[derive(Debug)]
-    struct Gelu;
+/// The autodiff op: its state is the input, and the backward pass multiplies the incoming
+/// gradient by `Φ(x) + x·φ(x)`.
+#[derive(Debug)]
+struct Gelu;
 
-    impl Backward<Flex, 1> for Gelu {
-        type State = FlexTensor;
+impl Backward<Flex, 1> for Gelu {
+    type State = [FlexTensor; 1];
 
-        fn backward(self, ops: Ops<FlexTensor, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
-            let x = ops.state;
-            unary::<Flex, _>(ops.parents, ops.node, grads, |grad| backward(&x, grad));
-        }
-    }
-
-    let inner = Autodiff::<Flex>::inner(input.clone());
-    match Gelu
-        .prepare::<NoCheckpointing>([input.node()])
-        .compute_bound()
-        .stateful()
-    {
-        OpsKind::Tracked(prep) => prep.finish(inner.clone(), forward(inner)),
-        OpsKind::UnTracked(prep) => prep.finish(forward(inner)),
+    fn backward(self, ops: Ops<[FlexTensor; 1], 1>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [x] = ops.state;
+        unary::<Flex, _>(ops.parents, ops.node, grads, |grad| {
+            let shape = grad.layout().shape().clone();
+            let mut out = values(&grad).to_vec();
+            kernels::scale_by_derivative(&values(&x), &mut out);
+            flex(out, shape)
+        });
     }
 }
 
-/// `GELU(x)` of a Flex tensor, in place when nothing else holds it.
+/// `GELU(x)` of a Flex tensor, in place when nothing else holds its buffer.
 fn forward(mut x: FlexTensor) -> FlexTensor {
     let shape = x.layout().shape().clone();
     let whole_buffer = x.is_contiguous()
         && x.layout().start_offset() == 0
         && x.bytes().len() == shape.num_elements() * size_of::<f32>();
-    if let Some(values) = x.try_storage_mut::<f32>().filter(|_| whole_buffer) {
-        kernels::gelu_in_place(values);
+    if let Some(buffer) = x.try_storage_mut::<f32>().filter(|_| whole_buffer) {
+        kernels::gelu_in_place(buffer);
         return x;
     }
-    let values = contiguous(&x);
-    let mut out = values.to_vec();
+    let mut out = values(&x).to_vec();
     kernels::gelu_in_place(&mut out);
-    FlexTensor::from_data(TensorData::new(out, shape))
+    flex(out, shape)
 }
 
-/// `grad · GELU′(x)`.
-fn backward(x: &FlexTensor, grad: FlexTensor) -> FlexTensor {
-    let shape = grad.layout().shape().clone();
-    debug_assert_eq!(&shape, x.layout().shape());
-    let mut out = contiguous(&grad).to_vec();
-    kernels::scale_by_derivative(&contiguous(x), &mut out);
-    FlexTensor::from_data(TensorData::new(out, shape))
-}
-
-/// The tensor's values in row-major order (borrowed when its layout already is that).
-fn contiguous(x: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {
-    match x.as_slice::<f32>() {
-        Some(values) => values.into(),
-        None => x
-            .to_contiguous()
-            .as_slice::<f32>()
-            .expect("contiguous")
-            .to_vec()
-            .into(),
-    }
-}
-
-/// The elementwise loops, one per instruction set (same code, same bits).
 mod kernels {
     use std::f32::consts::{FRAC_1_SQRT_2, LOG2_E};
 
@@ -125,7 +74,10 @@ mod kernels {
         const LN_2_HI: f32 = 0.693_359_4;
         const LN_2_LO: f32 = -2.121_944_4e-4;
         let v = v.max(-87.0);
-        let n = (v * LOG2_E + ROUND) - ROUND;
+        // `n` sits in the low bits of `shifted`'s mantissa: 2^n is built from those bits with
+        // integer adds and a shift, which vectorise (a float-to-int cast does not, saturating).
+        let shifted = v * LOG2_E + ROUND;
+        let n = shifted - ROUND;
         let r = (v - n * LN_2_HI) - n * LN_2_LO;
         let p = ((((1.987_569_1e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2)
             * r
@@ -133,7 +85,11 @@ mod kernels {
             * r
             + 0.5;
         let e_r = p * r * r + r + 1.0;
-        e_r * f32::from_bits(((n as i32 + 127) as u32) << 23)
+        let biased_exponent = shifted
+            .to_bits()
+            .wrapping_sub(ROUND.to_bits())
+            .wrapping_add(127);
+        e_r * f32::from_bits(biased_exponent << 23)
     }
 
     /// `(erf(z), e^{−z²})` by Abramowitz & Stegun 7.1.26, as PyTorch's vectorised `erf`.
@@ -170,68 +126,16 @@ mod kernels {
 
     #[inline(always)]
     fn derivative_loop(x: &[f32], grad: &mut [f32]) {
+        assert_eq!(x.len(), grad.len());
         for (g, &x) in grad.iter_mut().zip(x) {
             *g *= derivative(x);
         }
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn gelu_avx512(values: &mut [f32]) {
-        gelu_loop(values)
-    }
+    best_isa!(gelu_in_place(values: &mut [f32]) { gelu_loop(values) });
+    best_isa!(scale_by_derivative(x: &[f32], grad: &mut [f32]) { derivative_loop(x, grad) });
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn gelu_avx2(values: &mut [f32]) {
-        gelu_loop(values)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn derivative_avx512(x: &[f32], grad: &mut [f32]) {
-        derivative_loop(x, grad)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn derivative_avx2(x: &[f32], grad: &mut [f32]) {
-        derivative_loop(x, grad)
-    }
-
-    /// `values ← GELU(values)`.
-    pub fn gelu_in_place(values: &mut [f32]) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU has AVX-512F (checked just above).
-                return unsafe { gelu_avx512(values) };
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU has AVX2 (checked just above).
-                return unsafe { gelu_avx2(values) };
-            }
-        }
-        gelu_loop(values)
-    }
-
-    /// `grad ← grad · GELU′(x)`.
-    pub fn scale_by_derivative(x: &[f32], grad: &mut [f32]) {
-        assert_eq!(x.len(), grad.len());
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU has AVX-512F (checked just above).
-                return unsafe { derivative_avx512(x, grad) };
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU has AVX2 (checked just above).
-                return unsafe { derivative_avx2(x, grad) };
-            }
-        }
-        derivative_loop(x, grad)
-    }
-
+    /// Both loops as the baseline build compiles them.
     #[cfg(test)]
     pub(super) fn portable(x: &[f32]) -> (Vec<f32>, Vec<f32>) {
         let mut values = x.to_vec();

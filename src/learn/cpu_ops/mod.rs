@@ -1,0 +1,123 @@
+//! Two ops of VDPO's transformer that burn-flex runs slowly, written for the CPU learner as
+//! custom autodiff ops through burn's `extension` API: GELU (libm's scalar `erff`) and the
+//! layer norm (on the autodiff graph, burn composes it from eight elementwise ops and their
+//! backward passes, each a fresh allocation). Both loops are compiled for AVX-512 and AVX2 and
+//! picked at run time, in plain multiplies and adds with sums over fixed lanes, so every
+//! instruction set computes the same bits. Tensors elsewhere (wgpu, gradient checkpointing)
+//! take burn's ops.
+use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
+use burn::backend::autodiff::ops::{Backward, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Autodiff, DispatchDevice, Flex, GradientCheckpointingStrategy};
+use burn::prelude::{Tensor, TensorData};
+use burn::tensor::DType;
+
+/// Compiles `$body` (an `#[inline(always)]` function's call) for AVX-512F and AVX2 and runs the
+/// best the CPU has, or the baseline build.
+macro_rules! best_isa {
+    ($name:ident($($arg:ident: $ty:ty),*) $body:block) => {
+        pub fn $name($($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f")]
+                fn avx512($($arg: $ty),*) $body
+                #[target_feature(enable = "avx2")]
+                fn avx2($($arg: $ty),*) $body
+                if std::arch::is_x86_feature_detected!("avx512f") {
+                    // SAFETY: the CPU has AVX-512F (checked just above).
+                    return unsafe { avx512($($arg),*) };
+                }
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU has AVX2 (checked just above).
+                    return unsafe { avx2($($arg),*) };
+                }
+            }
+            $body
+        }
+    };
+}
+
+mod gelu;
+mod layer_norm;
+
+pub use gelu::gelu;
+pub use layer_norm::layer_norm;
+
+/// How an op reaches a tensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Route {
+    /// A Flex tensor off the graph.
+    Plain,
+    /// A Flex tensor on burn's autodiff graph (no gradient checkpointing).
+    Tracked,
+    /// Anything else: burn's own op.
+    Burn,
+}
+
+fn route<const D: usize>(x: &Tensor<D>) -> Route {
+    let device = x.device();
+    let on_flex = matches!(
+        device.clone().inner().as_dispatch(),
+        DispatchDevice::Flex(_)
+    );
+    if !on_flex || x.dtype() != DType::F32 {
+        return Route::Burn;
+    }
+    match device.gradient_checkpointing_strategy() {
+        None => Route::Plain,
+        Some(GradientCheckpointingStrategy::Disabled) => Route::Tracked,
+        Some(_) => Route::Burn,
+    }
+}
+
+fn plain<const D: usize>(x: Tensor<D>) -> FlexTensor {
+    x.try_into_primitive::<Flex>().expect("a Flex tensor")
+}
+
+fn tracked<const D: usize>(x: Tensor<D>) -> FloatTensor<Autodiff<Flex>> {
+    x.try_into_primitive::<Autodiff<Flex>>()
+        .expect("an autodiff Flex tensor")
+}
+
+/// Registers `op` on the graph over `inputs`, its output `forward(inner inputs)`, keeping the
+/// inner inputs as the backward pass's state.
+fn on_graph<Op, const N: usize>(
+    op: Op,
+    inputs: [FloatTensor<Autodiff<Flex>>; N],
+    forward: impl FnOnce(&[FlexTensor; N]) -> FlexTensor,
+) -> FloatTensor<Autodiff<Flex>>
+where
+    Op: Backward<Flex, N, State = [FlexTensor; N]>,
+{
+    use burn::backend::AutodiffBackend;
+    let nodes = inputs.each_ref().map(|input| input.node());
+    let inner = inputs.map(Autodiff::<Flex>::inner);
+    let output = forward(&inner);
+    match op
+        .prepare::<NoCheckpointing>(nodes)
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(prep) => prep.finish(inner, output),
+        OpsKind::UnTracked(prep) => prep.finish(output),
+    }
+}
+
+/// The tensor's values in row-major order (borrowed when its layout already is that).
+fn values(x: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {
+    match x.as_slice::<f32>() {
+        Some(values) => values.into(),
+        None => x
+            .to_contiguous()
+            .as_slice::<f32>()
+            .expect("contiguous")
+            .to_vec()
+            .into(),
+    }
+}
+
+/// A Flex tensor of `values` in `shape`.
+fn flex(values: Vec<f32>, shape: burn::tensor::Shape) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, shape))
+}
