@@ -23,12 +23,13 @@ pub fn layer_norm<const D: usize>(
     epsilon: f64,
 ) -> Tensor<D> {
     let routes = [route(&x), route(&gamma), route(&beta)];
-    let epsilon = epsilon as f32;
     match routes {
-        [Route::Plain, Route::Plain, Route::Plain] => {
-            Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(gamma), plain(beta)], epsilon))
-        }
+        [Route::Plain, Route::Plain, Route::Plain] => Tensor::from_primitive::<Flex>(forward(
+            &[plain(x), plain(gamma), plain(beta)],
+            epsilon as f32,
+        )),
         [Route::Tracked, Route::Tracked, Route::Tracked] => {
+            let epsilon = epsilon as f32;
             Tensor::from_primitive::<Autodiff<Flex>>(on_graph(
                 LayerNorm { epsilon },
                 [tracked(x), tracked(gamma), tracked(beta)],
@@ -46,7 +47,7 @@ fn per_run_in_burn<const D: usize>(
     x: Tensor<D>,
     gamma: Tensor<2>,
     beta: Tensor<2>,
-    epsilon: f32,
+    epsilon: f64,
 ) -> Tensor<D> {
     let [runs, width] = gamma.dims();
     let part = |p: &Tensor<2>, run: usize| p.clone().narrow(0, run, 1).reshape([width]);
@@ -57,7 +58,7 @@ fn per_run_in_burn<const D: usize>(
                     x.clone().narrow(0, run, 1),
                     part(&gamma, run),
                     Some(part(&beta, run)),
-                    f64::from(epsilon),
+                    epsilon,
                 )
             })
             .collect(),
@@ -304,7 +305,7 @@ mod tests {
         let y = if ours {
             layer_norm(x.clone(), gamma.clone(), beta.clone(), EPSILON)
         } else {
-            per_run_in_burn(x.clone(), gamma.clone(), beta.clone(), EPSILON as f32)
+            per_run_in_burn(x.clone(), gamma.clone(), beta.clone(), EPSILON)
         };
         let grads = (y.clone() * weights.clone()).sum().backward();
         [
