@@ -15,11 +15,12 @@
 //! `TransformerEncoder` holds the weights: `belief_blocks` pre-LN blocks, `belief_heads` heads,
 //! width `belief_width`, GELU feed-forward of the same width, then a LayerNorm; [`encode`] is
 //! its forward pass written out, with dropout masks drawn in bulk on the host instead of one
-//! generator call per entry, which was a sixth of an update's time). Two heads read it: a
-//! decoder reconstructing `s_{t−Δ+1+i}` at position `i` (trained every update, and the only loss
-//! that trains the transformer) and a Gaussian policy head (2×256 ReLU, as the reference) read at
-//! every position by the cloning loss — position `i` is cloned toward `π_ref(·|s_{t−Δ+1+i})` —
-//! and at the last position to act.
+//! generator call per entry, which was a sixth of an update's time; on the CPU its GELU and
+//! layer norms are dhrl's own ops, `learn::cpu_ops`, which took 13–22% off an update). Two
+//! heads read it: a decoder reconstructing `s_{t−Δ+1+i}` at position `i` (trained every
+//! update, and the only loss that trains the transformer) and a Gaussian policy head (2×256
+//! ReLU, as the reference) read at every position by the cloning loss — position `i` is cloned
+//! toward `π_ref(·|s_{t−Δ+1+i})` — and at the last position to act.
 //!
 //! Acting is unprivileged: the delayed policy acts on `x_t` alone, always. The reference code,
 //! while training, runs in an undelayed environment and executes whichever of the delayed and
