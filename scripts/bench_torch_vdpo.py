@@ -378,6 +378,7 @@ def main():
         agent.update(batch, k, k)
     seconds = time.perf_counter() - start
     torch_rate = args.updates / seconds
+    torch_ms = 1e3 * seconds / args.updates
     expected_bursts = args.updates // args.bc_every
     assert agent.bc_bursts == expected_bursts, (agent.bc_bursts, expected_bursts)
 
@@ -385,11 +386,10 @@ def main():
               "threads": args.threads, "updates": args.updates, "bc_every": args.bc_every,
               "bc_updates": args.bc_updates, "bc_bursts": agent.bc_bursts, "torch": torch.__version__,
               "torch_updates_per_sec": round(torch_rate, 2),
-              "torch_ms_per_update": round(1e3 * seconds / args.updates, 3),
+              "torch_ms_per_update": round(torch_ms, 3),
               "torch_bc_share": round(agent.bc_seconds / seconds, 3)}
     if args.products:
         gflop, products_ms = products_alone(agent, batch, args.updates + 1, args.bc_every)
-        torch_ms = 1e3 * seconds / args.updates
         report.update({"products_gflop_per_update": round(gflop, 3), "products_ms": round(products_ms, 2),
                        "products_gflop_per_sec": round(gflop / products_ms * 1e3, 1),
                        "torch_other_ms": round(torch_ms - products_ms, 2),
