@@ -49,9 +49,9 @@ impl StackedLinear {
         }
     }
 
-    /// `[S, B, in]` → `[S, B, out]`.
+    /// `[S, B, in]` → `[S, B, out]` ([`cpu_ops::linear`](super::cpu_ops::linear)).
     pub fn forward(&self, x: Tensor<3>) -> Tensor<3> {
-        x.matmul(self.weight.val()) + self.bias.val().unsqueeze_dim(1)
+        super::cpu_ops::linear(x, self.weight.val(), self.bias.val())
     }
 
     /// Slice `slice`'s weights as plain numbers (for export).

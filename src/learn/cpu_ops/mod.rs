@@ -1,10 +1,11 @@
-//! Two ops of VDPO's transformer that burn-flex runs slowly, written for the CPU learner as
-//! custom autodiff ops through burn's `extension` API: GELU (libm's scalar `erff`) and the
-//! layer norm (on the autodiff graph, burn composes it from eight elementwise ops and their
-//! backward passes, each a fresh allocation). Both loops are compiled for AVX-512 and AVX2 and
-//! picked at run time, in plain multiplies and adds with sums over fixed lanes, so every
-//! instruction set computes the same bits. Tensors elsewhere (wgpu, gradient checkpointing)
-//! take burn's ops.
+//! Ops that burn-flex runs slowly, written for the CPU learner as custom autodiff ops through
+//! burn's `extension` API: VDPO's GELU (libm's scalar `erff`) and layer norm (on the autodiff
+//! graph, burn composes it from eight elementwise ops and their backward passes, each a fresh
+//! allocation), and every algorithm's linear layer (burn zero-fills each product's buffer and
+//! adds the bias into another). The GELU and layer-norm loops are compiled for AVX-512 and AVX2
+//! and picked at run time, in plain multiplies and adds with sums over fixed lanes, so every
+//! instruction set computes the same bits; the linear layer keeps burn's bits. Tensors
+//! elsewhere (wgpu, gradient checkpointing) take burn's ops.
 use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::ops::{Backward, OpsKind};
 use burn::backend::flex::FlexTensor;
@@ -40,9 +41,11 @@ macro_rules! best_isa {
 
 mod gelu;
 mod layer_norm;
+mod linear;
 
 pub use gelu::gelu;
 pub use layer_norm::layer_norm;
+pub use linear::linear;
 
 /// How an op reaches a tensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

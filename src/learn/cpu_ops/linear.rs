@@ -1,0 +1,272 @@
+//! The stacked linear layer `y = x·W_s + b_s` as one op, and its backward pass
+//! `∂x = g·W_sᵀ`, `∂W_s = x_sᵀ·g`, `∂b_s = Σ_rows g`. burn composes it from a product (whose
+//! output buffer burn-flex zero-fills before gemm overwrites it), a broadcast add (a second
+//! buffer) and the add's and the reshape's backward passes. Here gemm writes each product
+//! straight into a fresh buffer and the bias is added in place. The products are burn-flex's
+//! own gemm calls (the same strides and threading) and the bias's gradient is burn's own sum,
+//! so every value and gradient keeps burn's bits (tested).
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops};
+use burn::backend::flex::FlexTensor;
+use burn::backend::ops::FloatTensorOps;
+use burn::backend::{Autodiff, Flex};
+use burn::prelude::Tensor;
+use burn::tensor::Shape;
+use rayon::prelude::*;
+
+use super::{Route, flex, on_graph, plain, route, tracked, values};
+
+/// `x` `[S, B, in]` times each run's `weight` `[S, in, out]` plus its `bias` `[S, out]`:
+/// `[S, B, out]`, differentiable in all three where they are.
+pub fn linear(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
+    let same_runs = x.dims()[0] == weight.dims()[0];
+    match [route(&x), route(&weight), route(&bias)] {
+        [Route::Plain, Route::Plain, Route::Plain] if same_runs => {
+            Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(weight), plain(bias)]))
+        }
+        [Route::Tracked, Route::Tracked, Route::Tracked] if same_runs => {
+            Tensor::from_primitive::<Autodiff<Flex>>(on_graph(
+                Linear,
+                [tracked(x), tracked(weight), tracked(bias)],
+                forward,
+            ))
+        }
+        _ => x.matmul(weight) + bias.unsqueeze_dim(1),
+    }
+}
+
+/// Its state is the inputs `[x, W, b]` (b for its shape).
+#[derive(Debug)]
+struct Linear;
+
+impl Backward<Flex, 3> for Linear {
+    type State = [FlexTensor; 3];
+
+    fn backward(self, ops: Ops<[FlexTensor; 3], 3>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [x, weight, bias] = ops.state;
+        let grad = grads.consume::<Flex>(&ops.node);
+        let [to_x, to_weight, to_bias] = ops.parents;
+        // burn's order: the add's backward (the bias), then the product's (x, then W).
+        if let Some(parent) = to_bias {
+            let rows = grad.layout().shape()[1];
+            // burn sums over the broadcast axis only where it is broadcast (B > 1).
+            let summed = if rows > 1 {
+                Flex::float_sum_dim(grad.clone(), 1)
+            } else {
+                grad.clone()
+            };
+            let shape = bias.layout().shape().clone();
+            grads.register::<Flex>(parent.id, Flex::float_reshape(summed, shape));
+        }
+        if let Some(parent) = to_x {
+            let (dx, shape) = product(&grad, &weight.transpose(1, 2));
+            grads.register::<Flex>(parent.id, flex(dx, shape));
+        }
+        if let Some(parent) = to_weight {
+            let (dweight, shape) = product(&x.transpose(1, 2), &grad);
+            grads.register::<Flex>(parent.id, flex(dweight, shape));
+        }
+    }
+}
+
+fn forward([x, weight, bias]: &[FlexTensor; 3]) -> FlexTensor {
+    let (mut out, shape) = product(x, weight);
+    let (rows, output) = (shape[1], shape[2]);
+    if rows * output > 0 {
+        for (run, run_bias) in out
+            .chunks_mut(rows * output)
+            .zip(values(bias).chunks(output))
+        {
+            for row in run.chunks_exact_mut(output) {
+                for (y, b) in row.iter_mut().zip(run_bias) {
+                    *y += b;
+                }
+            }
+        }
+    }
+    flex(out, shape)
+}
+
+/// One operand of a batched product: its storage, where it starts, and its strides (batch,
+/// row, column), the batch stride 0 for a batch of one, as burn-flex reads them.
+struct Operand<'a> {
+    values: &'a [f32],
+    start: isize,
+    batch: isize,
+    row: isize,
+    column: isize,
+}
+
+impl<'a> Operand<'a> {
+    fn of(tensor: &'a FlexTensor) -> Operand<'a> {
+        let layout = tensor.layout();
+        let strides = layout.strides();
+        Operand {
+            values: tensor.storage::<f32>(),
+            start: layout.start_offset() as isize,
+            batch: if layout.shape()[0] > 1 { strides[0] } else { 0 },
+            row: strides[1],
+            column: strides[2],
+        }
+    }
+
+    /// Where matrix `b` of the batch starts.
+    fn matrix(&self, b: usize) -> *const f32 {
+        self.values
+            .as_ptr()
+            .wrapping_offset(self.start + b as isize * self.batch)
+    }
+}
+
+/// gemm's sizes (products of `m × n × k`) above which burn-flex spreads one matrix over the
+/// threads, and a batch of them over the threads, one matrix each.
+const PARALLEL_MATRIX: usize = 192 * 192 * 192;
+const PARALLEL_BATCH: usize = 128 * 128 * 128;
+
+/// `lhs·rhs` per run, `[S, m, k]`·`[S, k, n]` → `[S, m, n]` (row-major), through the gemm calls
+/// burn-flex's batched product makes, into a buffer that is not filled first.
+fn product(lhs: &FlexTensor, rhs: &FlexTensor) -> (Vec<f32>, Shape) {
+    let lhs_shape = lhs.layout().shape();
+    let (runs, m, k, n) = (
+        lhs_shape[0],
+        lhs_shape[1],
+        lhs_shape[2],
+        rhs.layout().shape()[2],
+    );
+    let (lhs, rhs) = (Operand::of(lhs), Operand::of(rhs));
+    let (matrix, len) = (m * n, runs * m * n);
+    let mut out = Vec::<f32>::with_capacity(len);
+    let one = |b: usize, dst: *mut f32, parallelism: gemm::Parallelism| {
+        // SAFETY: `dst` has room for the `m × n` matrix at row stride `n`, the operands'
+        // pointers and strides are their tensors' own, and with `read_dst` false gemm writes
+        // every entry of `dst` (zeros when `k` is 0) without reading it.
+        unsafe {
+            gemm::gemm(
+                m,
+                n,
+                k,
+                dst,
+                1,
+                n as isize,
+                false,
+                lhs.matrix(b),
+                lhs.column,
+                lhs.row,
+                rhs.matrix(b),
+                rhs.column,
+                rhs.row,
+                0.0,
+                1.0,
+                false,
+                false,
+                false,
+                parallelism,
+            )
+        }
+    };
+    if matrix > 0 {
+        let per_matrix = matrix.saturating_mul(k);
+        let total = runs.saturating_mul(per_matrix);
+        let batch_parallel = runs >= 4 && total >= PARALLEL_BATCH;
+        let slots = &mut out.spare_capacity_mut()[..len];
+        if per_matrix >= PARALLEL_MATRIX && !batch_parallel {
+            for (b, dst) in slots.chunks_mut(matrix).enumerate() {
+                one(b, dst.as_mut_ptr().cast(), gemm::Parallelism::Rayon(0));
+            }
+        } else if total >= PARALLEL_BATCH && runs > 1 {
+            slots
+                .par_chunks_mut(matrix)
+                .enumerate()
+                .for_each(|(b, dst)| one(b, dst.as_mut_ptr().cast(), gemm::Parallelism::None));
+        } else {
+            for (b, dst) in slots.chunks_mut(matrix).enumerate() {
+                one(b, dst.as_mut_ptr().cast(), gemm::Parallelism::None);
+            }
+        }
+    }
+    // SAFETY: the loops above wrote all `len` entries (none when `m × n` is 0).
+    unsafe { out.set_len(len) };
+    (out, Shape::new([runs, m, n]))
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::prelude::{Device, Tensor};
+    use burn::tensor::Distribution;
+
+    use super::linear;
+    use crate::learn::to_vec;
+
+    /// The output and the gradients of x (where it has one), W and b, by our op or by burn's
+    /// composition `x·W + b`, under a loss weighting every entry of the output differently.
+    fn run(ours: bool, x: &Tensor<3>, params: &[Tensor<3>; 2], bias: &Tensor<2>) -> Vec<Vec<f32>> {
+        let [weight, loss_weights] = params;
+        let x_tracked = x.is_require_grad();
+        let (weight, bias) = (
+            weight.clone().detach().require_grad(),
+            bias.clone().detach().require_grad(),
+        );
+        let y = if ours {
+            linear(x.clone(), weight.clone(), bias.clone())
+        } else {
+            x.clone().matmul(weight.clone()) + bias.clone().unsqueeze_dim(1)
+        };
+        let grads = (y.clone() * loss_weights.clone()).sum().backward();
+        let mut out = vec![to_vec(y)];
+        if x_tracked {
+            out.push(to_vec(x.grad(&grads).expect("x's gradient")));
+        }
+        out.push(to_vec(weight.grad(&grads).expect("W's gradient")));
+        out.push(to_vec(bias.grad(&grads).expect("b's gradient")));
+        out
+    }
+
+    fn bits(values: &[Vec<f32>]) -> Vec<Vec<u32>> {
+        values
+            .iter()
+            .map(|v| v.iter().map(|f| f.to_bits()).collect())
+            .collect()
+    }
+
+    /// Every shape the learners use: a critic's scalar head, one row (acting), small stacks,
+    /// a stack of four spread over the threads one matrix each, one large matrix spread over
+    /// the threads; x contiguous and tracked, or a transposed view off the graph (an input).
+    #[test]
+    fn keeps_burns_bits_in_value_and_every_gradient() {
+        let device = Device::flex().autodiff();
+        let shapes = [
+            (1, 7, 5, 1),
+            (2, 1, 9, 3),
+            (3, 33, 17, 8),
+            (4, 256, 256, 256),
+            (1, 256, 256, 256),
+        ];
+        for (runs, rows, input, output) in shapes {
+            let normal = Distribution::Normal(0.0, 1.0);
+            let weight = Tensor::<3>::random([runs, input, output], normal, &device);
+            let bias = Tensor::<2>::random([runs, output], normal, &device);
+            let loss_weights = Tensor::<3>::random([runs, rows, output], normal, &device);
+            let params = [weight, loss_weights];
+            let contiguous = Tensor::<3>::random([runs, rows, input], normal, &device);
+            let transposed =
+                Tensor::<3>::random([runs, input, rows], normal, &device).swap_dims(1, 2);
+            for x in [contiguous.require_grad(), transposed] {
+                let ours = run(true, &x, &params, &bias);
+                let burns = run(false, &x, &params, &bias);
+                assert_eq!(ours.len(), burns.len());
+                assert!(
+                    bits(&ours) == bits(&burns),
+                    "{runs}×{rows}×{input}→{output}, x tracked: {}",
+                    x.is_require_grad()
+                );
+            }
+            // Off the graph (target networks, acting), on the plain device.
+            let (weight, bias) = (params[0].clone().inner(), bias.inner());
+            let x = Tensor::<3>::random([runs, rows, input], normal, &weight.device());
+            let ours = linear(x.clone(), weight.clone(), bias.clone());
+            let burns = x.matmul(weight) + bias.unsqueeze_dim(1);
+            assert!(bits(&[to_vec(ours)]) == bits(&[to_vec(burns)]));
+        }
+    }
+}
