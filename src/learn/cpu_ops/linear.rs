@@ -4,7 +4,9 @@
 //! buffer) and the add's and the reshape's backward passes. Here gemm writes each product
 //! straight into a fresh buffer and the bias is added in place. The products are burn-flex's
 //! own gemm calls (the same strides and threading) and the bias's gradient is burn's own sum,
-//! so every value and gradient keeps burn's bits (tested).
+//! so the op's value and its three gradients keep burn's bits (tested). (A tensor that takes
+//! three or more gradients may sum them in another order than before: the graph is one node
+//! shallower.)
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops};
@@ -20,12 +22,16 @@ use super::{Route, flex, on_graph, plain, route, tracked, values};
 /// `x` `[S, B, in]` times each run's `weight` `[S, in, out]` plus its `bias` `[S, out]`:
 /// `[S, B, out]`, differentiable in all three where they are.
 pub fn linear(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
-    let same_runs = x.dims()[0] == weight.dims()[0];
+    // Anything else (a broadcast run axis or bias, no rows, mismatched sizes) is burn's to
+    // broadcast or to reject.
+    let ([runs, rows, input], [weight_runs, weight_input, output]) = (x.dims(), weight.dims());
+    let ours =
+        runs == weight_runs && rows > 0 && input == weight_input && bias.dims() == [runs, output];
     match [route(&x), route(&weight), route(&bias)] {
-        [Route::Plain, Route::Plain, Route::Plain] if same_runs => {
+        [Route::Plain, Route::Plain, Route::Plain] if ours => {
             Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(weight), plain(bias)]))
         }
-        [Route::Tracked, Route::Tracked, Route::Tracked] if same_runs => {
+        [Route::Tracked, Route::Tracked, Route::Tracked] if ours => {
             Tensor::from_primitive::<Autodiff<Flex>>(on_graph(
                 Linear,
                 [tracked(x), tracked(weight), tracked(bias)],
@@ -47,7 +53,6 @@ impl Backward<Flex, 3> for Linear {
         let [x, weight, bias] = ops.state;
         let grad = grads.consume::<Flex>(&ops.node);
         let [to_x, to_weight, to_bias] = ops.parents;
-        // burn's order: the add's backward (the bias), then the product's (x, then W).
         if let Some(parent) = to_bias {
             let rows = grad.layout().shape()[1];
             // burn sums over the broadcast axis only where it is broadcast (B > 1).
@@ -135,8 +140,14 @@ fn product(lhs: &FlexTensor, rhs: &FlexTensor) -> (Vec<f32>, Shape) {
         rhs.layout().shape()[2],
     );
     let (lhs, rhs) = (Operand::of(lhs), Operand::of(rhs));
-    let (matrix, len) = (m * n, runs * m * n);
+    let matrix = m.checked_mul(n).expect("a product's size fits in memory");
+    let len = runs
+        .checked_mul(matrix)
+        .expect("a product's size fits in memory");
     let mut out = Vec::<f32>::with_capacity(len);
+    // The tests fill the buffer with NaN first: a read before gemm's write would show.
+    #[cfg(test)]
+    out.spare_capacity_mut()[..len].fill(std::mem::MaybeUninit::new(f32::NAN));
     let one = |b: usize, dst: *mut f32, parallelism: gemm::Parallelism| {
         // SAFETY: `dst` has room for the `m × n` matrix at row stride `n`, the operands'
         // pointers and strides are their tensors' own, and with `read_dst` false gemm writes
@@ -229,14 +240,16 @@ mod tests {
             .collect()
     }
 
-    /// Every shape the learners use: a critic's scalar head, one row (acting), small stacks,
-    /// a stack of four spread over the threads one matrix each, one large matrix spread over
-    /// the threads; x contiguous and tracked, or a transposed view off the graph (an input).
+    /// Every shape the learners use: a critic's scalar head, one row (a solo run acting, and in
+    /// a stack), small stacks, a stack of four spread over the threads one matrix each, one
+    /// large matrix spread over the threads; x contiguous and tracked, or a transposed view off
+    /// the graph (an input); W contiguous, or a transposed view.
     #[test]
     fn keeps_burns_bits_in_value_and_every_gradient() {
         let device = Device::flex().autodiff();
         let shapes = [
             (1, 7, 5, 1),
+            (1, 1, 6, 4),
             (2, 1, 9, 3),
             (3, 33, 17, 8),
             (4, 256, 256, 256),
@@ -245,13 +258,19 @@ mod tests {
         for (runs, rows, input, output) in shapes {
             let normal = Distribution::Normal(0.0, 1.0);
             let weight = Tensor::<3>::random([runs, input, output], normal, &device);
+            let weight_view =
+                Tensor::<3>::random([runs, output, input], normal, &device).swap_dims(1, 2);
             let bias = Tensor::<2>::random([runs, output], normal, &device);
             let loss_weights = Tensor::<3>::random([runs, rows, output], normal, &device);
-            let params = [weight, loss_weights];
             let contiguous = Tensor::<3>::random([runs, rows, input], normal, &device);
             let transposed =
                 Tensor::<3>::random([runs, input, rows], normal, &device).swap_dims(1, 2);
-            for x in [contiguous.require_grad(), transposed] {
+            let cases = [
+                (contiguous.require_grad(), weight.clone()),
+                (transposed, weight_view),
+            ];
+            for (x, weight) in cases {
+                let params = [weight, loss_weights.clone()];
                 let ours = run(true, &x, &params, &bias);
                 let burns = run(false, &x, &params, &bias);
                 assert_eq!(ours.len(), burns.len());
@@ -261,6 +280,7 @@ mod tests {
                     x.is_require_grad()
                 );
             }
+            let params = [weight, loss_weights];
             // Off the graph (target networks, acting), on the plain device.
             let (weight, bias) = (params[0].clone().inner(), bias.inner());
             let x = Tensor::<3>::random([runs, rows, input], normal, &weight.device());
@@ -268,5 +288,18 @@ mod tests {
             let burns = x.matmul(weight) + bias.unsqueeze_dim(1);
             assert!(bits(&[to_vec(ours)]) == bits(&[to_vec(burns)]));
         }
+    }
+
+    /// A bias shared by every run of the stack is not the op's: burn broadcasts it.
+    #[test]
+    fn leaves_a_broadcast_bias_to_burn() {
+        let device = Device::flex();
+        let normal = Distribution::Normal(0.0, 1.0);
+        let x = Tensor::<3>::random([2, 5, 3], normal, &device);
+        let weight = Tensor::<3>::random([2, 3, 4], normal, &device);
+        let shared = Tensor::<2>::random([1, 4], normal, &device);
+        let ours = linear(x.clone(), weight.clone(), shared.clone());
+        let burns = x.matmul(weight) + shared.unsqueeze_dim(1);
+        assert!(bits(&[to_vec(ours)]) == bits(&[to_vec(burns)]));
     }
 }
