@@ -38,8 +38,13 @@ pub fn linear(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
                 forward,
             ))
         }
-        _ => x.matmul(weight) + bias.unsqueeze_dim(1),
+        _ => composed(x, weight, bias),
     }
+}
+
+/// burn's own composition of the layer (its product, then a broadcast add).
+fn composed(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
+    x.matmul(weight) + bias.unsqueeze_dim(1)
 }
 
 /// Its state is the inputs `[x, W, b]` (b for its shape).
@@ -206,7 +211,7 @@ mod tests {
     use burn::prelude::{Device, Tensor};
     use burn::tensor::Distribution;
 
-    use super::linear;
+    use super::{composed, linear};
     use crate::learn::to_vec;
 
     /// The output and the gradients of x (where it has one), W and b, by our op or by burn's
@@ -221,7 +226,7 @@ mod tests {
         let y = if ours {
             linear(x.clone(), weight.clone(), bias.clone())
         } else {
-            x.clone().matmul(weight.clone()) + bias.clone().unsqueeze_dim(1)
+            composed(x.clone(), weight.clone(), bias.clone())
         };
         let grads = (y.clone() * loss_weights.clone()).sum().backward();
         let mut out = vec![to_vec(y)];
@@ -280,12 +285,11 @@ mod tests {
                     x.is_require_grad()
                 );
             }
-            let params = [weight, loss_weights];
             // Off the graph (target networks, acting), on the plain device.
-            let (weight, bias) = (params[0].clone().inner(), bias.inner());
+            let (weight, bias) = (weight.inner(), bias.inner());
             let x = Tensor::<3>::random([runs, rows, input], normal, &weight.device());
             let ours = linear(x.clone(), weight.clone(), bias.clone());
-            let burns = x.matmul(weight) + bias.unsqueeze_dim(1);
+            let burns = composed(x, weight, bias);
             assert!(bits(&[to_vec(ours)]) == bits(&[to_vec(burns)]));
         }
     }
@@ -299,7 +303,7 @@ mod tests {
         let weight = Tensor::<3>::random([2, 3, 4], normal, &device);
         let shared = Tensor::<2>::random([1, 4], normal, &device);
         let ours = linear(x.clone(), weight.clone(), shared.clone());
-        let burns = x.matmul(weight) + shared.unsqueeze_dim(1);
+        let burns = composed(x, weight, shared);
         assert!(bits(&[to_vec(ours)]) == bits(&[to_vec(burns)]));
     }
 }
