@@ -12,7 +12,7 @@ mod noise;
 mod stack;
 mod tensors;
 
-pub use cpu_ops::gelu;
+pub use cpu_ops::{adam, gelu};
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
 pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};
@@ -23,7 +23,7 @@ pub use losses::{
 };
 pub use nets::{
     ActionScale, GaussianPolicy, HIDDEN, LOG_STD_MAX, LOG_STD_MIN, Mlp, MlpConfig, PolicySample,
-    QNetwork, Temperature, TwinQ, adam, squashed_sample, squashed_samples_k,
+    QNetwork, Temperature, TwinQ, squashed_sample, squashed_samples_k,
 };
 pub use noise::Noise;
 pub use stack::{

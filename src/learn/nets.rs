@@ -1,7 +1,6 @@
 //! Networks: 256-256 ReLU MLPs, a tanh-squashed Gaussian policy, twin Q-networks and the
 //! learned temperature.
 use burn::module::Param;
-use burn::optim::{AdamConfig, ModuleOptimizer};
 use burn::prelude::*;
 use burn::tensor::activation::{relu, sigmoid};
 
@@ -294,9 +293,4 @@ impl Mlp {
             if i < last { relu(y) } else { y }
         })
     }
-}
-
-/// Adam with the given ε (the optimiser of every learner).
-pub fn adam(epsilon: f64) -> ModuleOptimizer {
-    AdamConfig::new().with_epsilon(epsilon as f32).init()
 }

@@ -2,7 +2,7 @@
 //! burn's `extension` API: VDPO's GELU (libm's scalar `erff`) and layer norm (on the autodiff
 //! graph, burn composes it from eight elementwise ops and their backward passes, each a fresh
 //! allocation), and every algorithm's linear layer (burn zero-fills each product's buffer and
-//! adds the bias into another). The GELU and layer-norm loops are compiled for AVX-512 and AVX2
+//! adds the bias into another); beside them Adam's step as one pass (burn takes thirteen). The GELU and layer-norm loops are compiled for AVX-512 and AVX2
 //! and picked at run time, in plain multiplies and adds with sums over fixed lanes, so every
 //! instruction set computes the same bits; the linear layer keeps burn's bits. Tensors
 //! elsewhere (wgpu, gradient checkpointing) take burn's ops.
@@ -39,10 +39,12 @@ macro_rules! best_isa {
     };
 }
 
+mod adam;
 mod gelu;
 mod layer_norm;
 mod linear;
 
+pub use adam::adam;
 pub use gelu::gelu;
 pub use layer_norm::layer_norm;
 pub use linear::linear;
