@@ -55,7 +55,7 @@ use crate::delay::{BatchExtras, ReplayError};
 use crate::learn::{
     ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, StackedLayerNorm,
     StackedLinear, TransitionTensors, adam, gelu, load_json_stack, load_optimizer_stack,
-    load_stack, select_runs, stack, stacked_rows, to_vec, upload,
+    load_stack, select_runs, stack, stacked_rows, times_mask, to_vec,
 };
 use crate::seeds;
 
@@ -495,8 +495,7 @@ impl DropoutMasks {
         for (run, slice) in runs.iter_mut().zip(mask.chunks_mut(per_run)) {
             run.fill_mask(slice);
         }
-        let mask = upload(TensorData::new(mask, shape), &x.device());
-        x * mask
+        times_mask(x, mask)
     }
 
     /// Fills `mask` with the next `mask.len()` entries of this run's masks: one `u32` of the

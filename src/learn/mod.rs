@@ -12,7 +12,7 @@ mod noise;
 mod stack;
 mod tensors;
 
-pub use cpu_ops::{adam, gelu};
+pub use cpu_ops::{adam, gelu, times_mask};
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
 pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};

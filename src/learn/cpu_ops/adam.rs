@@ -12,7 +12,7 @@ use burn::optim::{
 };
 use burn::prelude::{Device, Tensor};
 
-use super::{Route, flex, plain, route, values};
+use super::{Route, flex, plain, route, values, writable};
 
 /// burn's defaults, which every learner keeps.
 const BETA_1: f32 = 0.9;
@@ -136,19 +136,6 @@ impl Optimizer for FusedAdam {
 
     fn to_device<const D: usize>(state: AdamState<D>, device: &Device) -> AdamState<D> {
         Adam::to_device(state, device)
-    }
-}
-
-/// `x` when it alone owns a buffer holding exactly its values in order (so the pass can write
-/// it in place), else `Err(x)`.
-fn writable(mut x: FlexTensor) -> Result<FlexTensor, FlexTensor> {
-    let whole_buffer = x.is_contiguous()
-        && x.layout().start_offset() == 0
-        && x.bytes().len() == x.layout().shape().num_elements() * size_of::<f32>();
-    if whole_buffer && x.try_storage_mut::<f32>().is_some() {
-        Ok(x)
-    } else {
-        Err(x)
     }
 }
 

@@ -11,7 +11,7 @@ use burn::backend::{Autodiff, Flex};
 use burn::prelude::Tensor;
 use burn::tensor::activation;
 
-use super::{Route, flex, on_graph, plain, route, tracked, values};
+use super::{Route, flex, on_graph, plain, route, tracked, values, writable};
 
 /// `GELU(x)` elementwise, differentiable where `x` is.
 pub fn gelu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
@@ -45,18 +45,18 @@ impl Backward<Flex, 1> for Gelu {
 }
 
 /// `GELU(x)` of a Flex tensor, in place when nothing else holds its buffer.
-fn forward(mut x: FlexTensor) -> FlexTensor {
-    let shape = x.layout().shape().clone();
-    let whole_buffer = x.is_contiguous()
-        && x.layout().start_offset() == 0
-        && x.bytes().len() == shape.num_elements() * size_of::<f32>();
-    if let Some(buffer) = x.try_storage_mut::<f32>().filter(|_| whole_buffer) {
-        kernels::gelu_in_place(buffer);
-        return x;
+fn forward(x: FlexTensor) -> FlexTensor {
+    match writable(x) {
+        Ok(mut x) => {
+            kernels::gelu_in_place(x.storage_mut());
+            x
+        }
+        Err(x) => {
+            let mut out = values(&x).into_owned();
+            kernels::gelu_in_place(&mut out);
+            flex(out, x.layout().shape().clone())
+        }
     }
-    let mut out = values(&x).into_owned();
-    kernels::gelu_in_place(&mut out);
-    flex(out, shape)
 }
 
 mod kernels {

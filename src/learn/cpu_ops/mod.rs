@@ -2,7 +2,8 @@
 //! burn's `extension` API: VDPO's GELU (libm's scalar `erff`) and layer norm (on the autodiff
 //! graph, burn composes it from eight elementwise ops and their backward passes, each a fresh
 //! allocation), and every algorithm's linear layer (burn zero-fills each product's buffer and
-//! adds the bias into another); beside them Adam's step as one pass (burn takes thirteen). The GELU and layer-norm loops are compiled for AVX-512 and AVX2
+//! adds the bias into another), dropout's product with a host-drawn mask (an upload and two fresh
+//! buffers in burn); beside them Adam's step as one pass (burn takes thirteen). The GELU and layer-norm loops are compiled for AVX-512 and AVX2
 //! and picked at run time, in plain multiplies and adds with sums over fixed lanes, so every
 //! instruction set computes the same bits; the linear layer keeps burn's bits. Tensors
 //! elsewhere (wgpu, gradient checkpointing) take burn's ops.
@@ -40,11 +41,13 @@ macro_rules! best_isa {
 }
 
 mod adam;
+mod dropout;
 mod gelu;
 mod layer_norm;
 mod linear;
 
 pub use adam::adam;
+pub use dropout::times_mask;
 pub use gelu::gelu;
 pub use layer_norm::layer_norm;
 pub use linear::linear;
@@ -106,6 +109,19 @@ where
     {
         OpsKind::Tracked(prep) => prep.finish(inner, output),
         OpsKind::UnTracked(prep) => prep.finish(output),
+    }
+}
+
+/// `x` when it alone owns a buffer holding exactly its values in order (so that an op can write
+/// over them), else `Err(x)`.
+fn writable(mut x: FlexTensor) -> Result<FlexTensor, FlexTensor> {
+    let whole_buffer = x.is_contiguous()
+        && x.layout().start_offset() == 0
+        && x.bytes().len() == x.layout().shape().num_elements() * size_of::<f32>();
+    if whole_buffer && x.try_storage_mut::<f32>().is_some() {
+        Ok(x)
+    } else {
+        Err(x)
     }
 }
 
