@@ -2,7 +2,7 @@
 //! learned temperature.
 use burn::module::Param;
 use burn::prelude::*;
-use burn::tensor::activation::{relu, sigmoid};
+use burn::tensor::activation::sigmoid;
 
 use super::losses::squashed_gaussian_log_prob;
 use super::stack::StackedLinear;
@@ -31,7 +31,7 @@ impl Trunk {
     }
 
     fn forward(&self, x: Tensor<3>) -> Tensor<3> {
-        relu(self.l2.forward(relu(self.l1.forward(x))))
+        self.l2.forward_relu(self.l1.forward_relu(x))
     }
 }
 
@@ -289,8 +289,11 @@ impl Mlp {
     pub fn forward(&self, x: Tensor<3>) -> Tensor<3> {
         let last = self.layers.len() - 1;
         self.layers.iter().enumerate().fold(x, |x, (i, layer)| {
-            let y = layer.forward(x);
-            if i < last { relu(y) } else { y }
+            if i < last {
+                layer.forward_relu(x)
+            } else {
+                layer.forward(x)
+            }
         })
     }
 }

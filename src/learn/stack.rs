@@ -54,6 +54,11 @@ impl StackedLinear {
         super::cpu_ops::linear(x, self.weight.val(), self.bias.val())
     }
 
+    /// `relu(forward(x))`, a hidden layer ([`cpu_ops::linear_relu`](super::cpu_ops::linear_relu)).
+    pub fn forward_relu(&self, x: Tensor<3>) -> Tensor<3> {
+        super::cpu_ops::linear_relu(x, self.weight.val(), self.bias.val())
+    }
+
     /// Slice `slice`'s weights as plain numbers (for export).
     pub fn dense(&self, slice: usize) -> Dense {
         let [_, input, output] = self.weight.val().dims();

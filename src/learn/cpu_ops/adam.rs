@@ -91,38 +91,34 @@ impl Optimizer for FusedAdam {
                 (zeros(), zeros())
             }
         };
+        let n = grad.len();
         let (moment_1_values, moment_2_values) = (moment_1.storage_mut(), moment_2.storage_mut());
+        let mut step = |target: kernels::Target<'_>| {
+            kernels::adam_step(
+                target,
+                moment_1_values,
+                moment_2_values,
+                &grad,
+                &k,
+                time == 1,
+            );
+        };
         let param = match writable(plain(tensor)) {
             Ok(mut param) => {
-                let target = kernels::Target::InPlace(param.storage_mut());
-                kernels::adam_step(
-                    target,
-                    moment_1_values,
-                    moment_2_values,
-                    &grad,
-                    &k,
-                    time == 1,
-                );
+                step(kernels::Target::InPlace(param.storage_mut()));
                 param
             }
             // Shared (the learners step a clone of the module they hold): the new values go
-            // straight into a buffer of their own, which is what burn's step did too.
+            // into a buffer of their own, as burn's step writes every parameter.
             Err(shared) => {
-                let mut updated = Vec::with_capacity(grad.len());
-                let target = kernels::Target::Fresh {
+                let mut updated = Vec::with_capacity(n);
+                step(kernels::Target::Fresh {
                     from: &values(&shared),
-                    into: &mut updated.spare_capacity_mut()[..grad.len()],
-                };
-                kernels::adam_step(
-                    target,
-                    moment_1_values,
-                    moment_2_values,
-                    &grad,
-                    &k,
-                    time == 1,
-                );
-                // SAFETY: the step wrote every one of the `grad.len()` entries.
-                unsafe { updated.set_len(grad.len()) };
+                    into: &mut updated.spare_capacity_mut()[..n],
+                });
+                // SAFETY: the step sliced every input to `n` entries (panicking on a shorter
+                // one) and wrote each of the `n` entries of `into`.
+                unsafe { updated.set_len(n) };
                 flex(updated, shared.layout().shape().clone())
             }
         };

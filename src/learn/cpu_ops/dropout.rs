@@ -4,14 +4,13 @@
 //! state, the product is written over `x` when nothing else holds it, and the gradient is
 //! scaled in place. The same products, so the same bits (tested).
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
-use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind, unary};
+use burn::backend::autodiff::ops::{Backward, Ops, unary};
 use burn::backend::flex::FlexTensor;
-use burn::backend::{Autodiff, AutodiffBackend, Flex};
+use burn::backend::{Autodiff, Flex};
 use burn::prelude::{Tensor, TensorData};
 
-use super::{Route, flex, plain, route, tracked, values, writable};
+use super::{Route, flex, on_graph_keeping, plain, route, tracked, values, writable};
 use crate::learn::upload;
 
 /// `x · mask` elementwise, `mask` one entry per entry of `x` in row-major order;
@@ -23,22 +22,14 @@ pub fn times_mask<const D: usize>(x: Tensor<D>, mask: Vec<f32>) -> Tensor<D> {
     };
     match route {
         Route::Plain => Tensor::from_primitive::<Flex>(product(plain(x), &mask)),
-        Route::Tracked => {
-            let x = tracked(x);
-            let node = x.node();
-            let x = Autodiff::<Flex>::inner(x);
-            let mask = flex(mask, x.layout().shape().clone());
-            let output = product(x, values(&mask).as_ref());
-            let output = match TimesMask
-                .prepare::<NoCheckpointing>([node])
-                .compute_bound()
-                .stateful()
-            {
-                OpsKind::Tracked(prep) => prep.finish(mask, output),
-                OpsKind::UnTracked(prep) => prep.finish(output),
-            };
-            Tensor::from_primitive::<Autodiff<Flex>>(output)
-        }
+        Route::Tracked => Tensor::from_primitive::<Autodiff<Flex>>(on_graph_keeping(
+            TimesMask,
+            [tracked(x)],
+            |[x]| {
+                let mask = flex(mask, x.layout().shape().clone());
+                (product(x, values(&mask).as_ref()), mask)
+            },
+        )),
         // burn's own: it uploads the mask, and rejects a mask of another size.
         Route::Burn => {
             let shape = x.shape();

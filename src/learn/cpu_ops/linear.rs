@@ -6,7 +6,9 @@
 //! own gemm calls (the same strides and threading) and the bias's gradient is burn's own sum,
 //! so the op's value and its three gradients keep burn's bits (tested). (A tensor that takes
 //! three or more gradients may sum them in another order than before: the graph is one node
-//! shallower.)
+//! shallower.) A hidden layer's ReLU joins it (`linear_relu`): written over the output as the
+//! bias is added, and in the backward pass the gradient masked in place where the output is 0,
+//! as burn's ReLU and its backward pass compute them.
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops};
@@ -15,31 +17,54 @@ use burn::backend::ops::FloatTensorOps;
 use burn::backend::{Autodiff, Flex};
 use burn::prelude::Tensor;
 use burn::tensor::Shape;
+use burn::tensor::activation::relu;
 use rayon::prelude::*;
 
-use super::{Route, flex, on_graph, plain, route, tracked, values};
+use super::{Route, flex, on_graph, on_graph_keeping, plain, route, tracked, values, writable};
 
 /// `x` `[S, B, in]` times each run's `weight` `[S, in, out]` plus its `bias` `[S, out]`:
 /// `[S, B, out]`, differentiable in all three where they are.
 pub fn linear(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
-    // Anything else (a broadcast run axis or bias, no rows, mismatched sizes) is burn's to
-    // broadcast or to reject.
-    let ([runs, rows, input], [weight_runs, weight_input, output]) = (x.dims(), weight.dims());
-    let ours =
-        runs == weight_runs && rows > 0 && input == weight_input && bias.dims() == [runs, output];
     match [route(&x), route(&weight), route(&bias)] {
-        [Route::Plain, Route::Plain, Route::Plain] if ours => {
-            Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(weight), plain(bias)]))
+        [Route::Plain, Route::Plain, Route::Plain] if ours(&x, &weight, &bias) => {
+            Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(weight), plain(bias)], false))
         }
-        [Route::Tracked, Route::Tracked, Route::Tracked] if ours => {
+        [Route::Tracked, Route::Tracked, Route::Tracked] if ours(&x, &weight, &bias) => {
             Tensor::from_primitive::<Autodiff<Flex>>(on_graph(
                 Linear,
                 [tracked(x), tracked(weight), tracked(bias)],
-                forward,
+                |inputs| forward(inputs, false),
             ))
         }
         _ => composed(x, weight, bias),
     }
+}
+
+/// `relu(linear(x, weight, bias))`: a hidden layer.
+pub fn linear_relu(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
+    match [route(&x), route(&weight), route(&bias)] {
+        [Route::Plain, Route::Plain, Route::Plain] if ours(&x, &weight, &bias) => {
+            Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(weight), plain(bias)], true))
+        }
+        [Route::Tracked, Route::Tracked, Route::Tracked] if ours(&x, &weight, &bias) => {
+            Tensor::from_primitive::<Autodiff<Flex>>(on_graph_keeping(
+                LinearRelu,
+                [tracked(x), tracked(weight), tracked(bias)],
+                |inputs| {
+                    let output = forward(&inputs, true);
+                    (output.clone(), (inputs, output))
+                },
+            ))
+        }
+        _ => relu(composed(x, weight, bias)),
+    }
+}
+
+/// Whether the op takes these sizes: anything else (a broadcast run axis or bias, no rows,
+/// mismatched sizes) is burn's to broadcast or to reject.
+fn ours(x: &Tensor<3>, weight: &Tensor<3>, bias: &Tensor<2>) -> bool {
+    let ([runs, rows, input], [weight_runs, weight_input, output]) = (x.dims(), weight.dims());
+    runs == weight_runs && rows > 0 && input == weight_input && bias.dims() == [runs, output]
 }
 
 /// burn's own composition of the layer (its product, then a broadcast add).
@@ -55,32 +80,85 @@ impl Backward<Flex, 3> for Linear {
     type State = [FlexTensor; 3];
 
     fn backward(self, ops: Ops<[FlexTensor; 3], 3>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let [x, weight, bias] = ops.state;
-        let grad = grads.consume::<Flex>(&ops.node);
-        let [to_x, to_weight, to_bias] = ops.parents;
-        if let Some(parent) = to_bias {
-            let rows = grad.layout().shape()[1];
-            // burn sums over the broadcast axis only where it is broadcast (B > 1).
-            let summed = if rows > 1 {
-                Flex::float_sum_dim(grad.clone(), 1)
-            } else {
-                grad.clone()
-            };
-            let shape = bias.layout().shape().clone();
-            grads.register::<Flex>(parent.id, Flex::float_reshape(summed, shape));
+        backward(ops, grads, |inputs, grad| (inputs, grad));
+    }
+}
+
+/// Its state is the inputs and the output (where ReLU passed the gradient).
+#[derive(Debug)]
+struct LinearRelu;
+
+impl Backward<Flex, 3> for LinearRelu {
+    type State = ([FlexTensor; 3], FlexTensor);
+
+    fn backward(
+        self,
+        ops: Ops<([FlexTensor; 3], FlexTensor), 3>,
+        grads: &mut Gradients,
+        _: &mut Checkpointer,
+    ) {
+        backward(ops, grads, |(inputs, output), grad| {
+            (inputs, relu_gradient(&output, grad))
+        });
+    }
+}
+
+/// The layer's three gradients, `layer` giving its inputs and the gradient of its output
+/// (before any activation) from the op's state and the gradient it receives.
+fn backward<State>(
+    ops: Ops<State, 3>,
+    grads: &mut Gradients,
+    layer: impl FnOnce(State, FlexTensor) -> ([FlexTensor; 3], FlexTensor),
+) {
+    let ([x, weight, bias], grad) = layer(ops.state, grads.consume::<Flex>(&ops.node));
+    let [to_x, to_weight, to_bias] = ops.parents;
+    if let Some(parent) = to_bias {
+        let rows = grad.layout().shape()[1];
+        // burn sums over the broadcast axis only where it is broadcast (B > 1).
+        let summed = if rows > 1 {
+            Flex::float_sum_dim(grad.clone(), 1)
+        } else {
+            grad.clone()
+        };
+        let shape = bias.layout().shape().clone();
+        grads.register::<Flex>(parent.id, Flex::float_reshape(summed, shape));
+    }
+    if let Some(parent) = to_x {
+        let (dx, shape) = product(&grad, &weight.transpose(1, 2));
+        grads.register::<Flex>(parent.id, flex(dx, shape));
+    }
+    if let Some(parent) = to_weight {
+        let (dweight, shape) = product(&x.transpose(1, 2), &grad);
+        grads.register::<Flex>(parent.id, flex(dweight, shape));
+    }
+}
+
+/// `grad` where ReLU's `output` passed it (above 0, or NaN), 0 elsewhere: burn-flex's
+/// `relu_backward`, written over `grad` when nothing else holds it.
+fn relu_gradient(output: &FlexTensor, grad: FlexTensor) -> FlexTensor {
+    let passes = |out: f32, g: f32| if out.is_nan() || out > 0.0 { g } else { 0.0 };
+    let output = values(output);
+    match writable(grad) {
+        Ok(mut grad) => {
+            for (g, &out) in grad.storage_mut::<f32>().iter_mut().zip(output.iter()) {
+                *g = passes(out, *g);
+            }
+            grad
         }
-        if let Some(parent) = to_x {
-            let (dx, shape) = product(&grad, &weight.transpose(1, 2));
-            grads.register::<Flex>(parent.id, flex(dx, shape));
-        }
-        if let Some(parent) = to_weight {
-            let (dweight, shape) = product(&x.transpose(1, 2), &grad);
-            grads.register::<Flex>(parent.id, flex(dweight, shape));
+        Err(grad) => {
+            let masked = values(&grad)
+                .iter()
+                .zip(output.iter())
+                .map(|(&g, &out)| passes(out, g))
+                .collect();
+            flex(masked, grad.layout().shape().clone())
         }
     }
 }
 
-fn forward([x, weight, bias]: &[FlexTensor; 3]) -> FlexTensor {
+/// The layer's output, its ReLU applied as the bias is added when `relu` (burn-flex's: a NaN
+/// passes, anything not above 0 becomes 0).
+fn forward([x, weight, bias]: &[FlexTensor; 3], relu: bool) -> FlexTensor {
     let (mut out, shape) = product(x, weight);
     let (rows, output) = (shape[1], shape[2]);
     if rows * output > 0 {
@@ -91,6 +169,9 @@ fn forward([x, weight, bias]: &[FlexTensor; 3]) -> FlexTensor {
             for row in run.chunks_exact_mut(output) {
                 for (y, b) in row.iter_mut().zip(run_bias) {
                     *y += b;
+                    if relu && !(y.is_nan() || *y > 0.0) {
+                        *y = 0.0;
+                    }
                 }
             }
         }
@@ -211,23 +292,42 @@ mod tests {
     use burn::prelude::{Device, Tensor};
     use burn::tensor::Distribution;
 
-    use super::{composed, linear};
+    use burn::tensor::activation::relu;
+
+    use super::{composed, linear, linear_relu};
     use crate::learn::to_vec;
 
+    /// The layer (with ReLU after it when `hidden`) by our op or by burn's composition.
+    fn layer(
+        ours: bool,
+        hidden: bool,
+        x: Tensor<3>,
+        weight: Tensor<3>,
+        bias: Tensor<2>,
+    ) -> Tensor<3> {
+        match (ours, hidden) {
+            (true, false) => linear(x, weight, bias),
+            (true, true) => linear_relu(x, weight, bias),
+            (false, false) => composed(x, weight, bias),
+            (false, true) => relu(composed(x, weight, bias)),
+        }
+    }
+
     /// The output and the gradients of x (where it has one), W and b, by our op or by burn's
-    /// composition `x·W + b`, under a loss weighting every entry of the output differently.
-    fn run(ours: bool, x: &Tensor<3>, params: &[Tensor<3>; 2], bias: &Tensor<2>) -> Vec<Vec<f32>> {
+    /// composition, under a loss weighting every entry of the output differently.
+    fn run(
+        (ours, hidden): (bool, bool),
+        x: &Tensor<3>,
+        params: &[Tensor<3>; 2],
+        bias: &Tensor<2>,
+    ) -> Vec<Vec<f32>> {
         let [weight, loss_weights] = params;
         let x_tracked = x.is_require_grad();
         let (weight, bias) = (
             weight.clone().detach().require_grad(),
             bias.clone().detach().require_grad(),
         );
-        let y = if ours {
-            linear(x.clone(), weight.clone(), bias.clone())
-        } else {
-            composed(x.clone(), weight.clone(), bias.clone())
-        };
+        let y = layer(ours, hidden, x.clone(), weight.clone(), bias.clone());
         let grads = (y.clone() * loss_weights.clone()).sum().backward();
         let mut out = vec![to_vec(y)];
         if x_tracked {
@@ -276,22 +376,45 @@ mod tests {
             ];
             for (x, weight) in cases {
                 let params = [weight, loss_weights.clone()];
-                let ours = run(true, &x, &params, &bias);
-                let burns = run(false, &x, &params, &bias);
-                assert_eq!(ours.len(), burns.len());
-                assert!(
-                    bits(&ours) == bits(&burns),
-                    "{runs}×{rows}×{input}→{output}, x tracked: {}",
-                    x.is_require_grad()
-                );
+                for hidden in [false, true] {
+                    let ours = run((true, hidden), &x, &params, &bias);
+                    let burns = run((false, hidden), &x, &params, &bias);
+                    assert_eq!(ours.len(), burns.len());
+                    assert!(
+                        bits(&ours) == bits(&burns),
+                        "{runs}×{rows}×{input}→{output}, x tracked: {}, ReLU: {hidden}",
+                        x.is_require_grad()
+                    );
+                }
             }
             // Off the graph (target networks, acting), on the plain device.
             let (weight, bias) = (weight.inner(), bias.inner());
             let x = Tensor::<3>::random([runs, rows, input], normal, &weight.device());
-            let ours = linear(x.clone(), weight.clone(), bias.clone());
-            let burns = composed(x, weight, bias);
-            assert!(bits(&[to_vec(ours)]) == bits(&[to_vec(burns)]));
+            for hidden in [false, true] {
+                let ours = layer(true, hidden, x.clone(), weight.clone(), bias.clone());
+                let burns = layer(false, hidden, x.clone(), weight.clone(), bias.clone());
+                assert!(bits(&[to_vec(ours)]) == bits(&[to_vec(burns)]));
+            }
         }
+    }
+
+    /// ReLU keeps a NaN (as burn's does) and zeroes what is not above 0, in value and gradient.
+    #[test]
+    fn relu_passes_nan_and_stops_at_zero_as_burns() {
+        let device = Device::flex().autodiff();
+        // x·W is [NaN, 0, −1, 2] across the four outputs of the one row.
+        let x = Tensor::<3>::from_floats([[[1.0, 0.0]]], &device).require_grad();
+        let weight = Tensor::<3>::from_floats(
+            [[[f32::NAN, 0.0, -1.0, 2.0], [5.0, 5.0, 5.0, 5.0]]],
+            &device,
+        );
+        let bias = Tensor::<2>::zeros([1, 4], &device);
+        let loss_weights = Tensor::<3>::from_floats([[[1.0, 2.0, 3.0, 4.0]]], &device);
+        let params = [weight, loss_weights];
+        let ours = run((true, true), &x, &params, &bias);
+        let burns = run((false, true), &x, &params, &bias);
+        assert!(bits(&ours) == bits(&burns));
+        assert!(ours[0][0].is_nan() && ours[0][1..] == [0.0, 0.0, 2.0]);
     }
 
     /// A bias shared by every run of the stack is not the op's: burn broadcasts it.

@@ -50,7 +50,7 @@ pub use adam::adam;
 pub use dropout::times_mask;
 pub use gelu::gelu;
 pub use layer_norm::layer_norm;
-pub use linear::linear;
+pub use linear::{linear, linear_relu};
 
 /// How an op reaches a tensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -98,16 +98,28 @@ fn on_graph<Op, const N: usize>(
 where
     Op: Backward<Flex, N, State = [FlexTensor; N]>,
 {
+    on_graph_keeping(op, inputs, |inner| (forward(&inner), inner))
+}
+
+/// Registers `op` on the graph over `inputs`; `forward` maps the inner inputs to the output and
+/// the backward pass's state.
+fn on_graph_keeping<Op, const N: usize>(
+    op: Op,
+    inputs: [FloatTensor<Autodiff<Flex>>; N],
+    forward: impl FnOnce([FlexTensor; N]) -> (FlexTensor, Op::State),
+) -> FloatTensor<Autodiff<Flex>>
+where
+    Op: Backward<Flex, N>,
+{
     use burn::backend::AutodiffBackend;
     let nodes = inputs.each_ref().map(|input| input.node());
-    let inner = inputs.map(Autodiff::<Flex>::inner);
-    let output = forward(&inner);
+    let (output, state) = forward(inputs.map(Autodiff::<Flex>::inner));
     match op
         .prepare::<NoCheckpointing>(nodes)
         .compute_bound()
         .stateful()
     {
-        OpsKind::Tracked(prep) => prep.finish(inner, output),
+        OpsKind::Tracked(prep) => prep.finish(state, output),
         OpsKind::UnTracked(prep) => prep.finish(output),
     }
 }
