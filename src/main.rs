@@ -76,8 +76,9 @@ fn keep_freed_memory() {
 fn main() -> anyhow::Result<()> {
     keep_freed_memory();
     // Every thread of this process that does math flushes subnormal floats (src/float_mode.rs):
-    // this one, and rayon's global pool, which the CPU delay layer's larger batches use when
-    // the simulation has one thread (with more, they run on the simulation's own pool).
+    // this one, and rayon's global pool, which the CPU delay layer's larger batches use when the
+    // simulation has one thread outside training (evaluation, rollouts; in training they run on
+    // the learner threads the loop runs on, and with more simulation threads on its own pool).
     dhrl::float_mode::apply_to_this_thread();
     rayon::ThreadPoolBuilder::new()
         .start_handler(|_| dhrl::float_mode::apply_to_this_thread())

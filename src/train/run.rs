@@ -752,11 +752,9 @@ impl Trainer {
         }
         let counts: Vec<usize> = acting.iter().map(Vec::len).collect();
         let chosen = match counts.iter().any(|&count| count > 0) {
-            true => {
-                let agent = &mut self.agent;
-                self.learner_pool
-                    .install(|| agent.act_runs(&augmented, &counts, copies, ActMode::Explore))
-            }
+            true => self
+                .agent
+                .act_runs(&augmented, &counts, copies, ActMode::Explore),
             false => Vec::new(),
         };
         let chosen_by = |i: usize| match counts[i] {
@@ -808,11 +806,7 @@ impl Trainer {
                 )
             })
             .collect();
-        let agent = &mut self.agent;
-        let stats = match self
-            .learner_pool
-            .install(|| agent.update_runs(&mut contexts))
-        {
+        let stats = match self.agent.update_runs(&mut contexts) {
             Ok(stats) => stats,
             // Nothing complete yet (e.g. delay longer than the warm-up): learn later. A stack
             // updates when every run has a complete transition.
@@ -894,27 +888,23 @@ impl Trainer {
         let slot = &self.slots[i];
         let seed = seeds::evaluation(slot.config.seed, slot.state.evals_done);
         let (agent, config) = (&mut self.agent, &slot.config);
-        let result = self.learner_pool.install(|| {
-            evaluate(
-                agent.as_mut(),
-                EvalPolicy::Regular { run: i },
-                config.task,
-                &config.delay,
-                config.delay_device,
-                config.eval_episodes,
-                config.threads,
-                seed,
-            )
-        })?;
+        let result = evaluate(
+            agent.as_mut(),
+            EvalPolicy::Regular { run: i },
+            config.task,
+            &config.delay,
+            config.delay_device,
+            config.eval_episodes,
+            config.threads,
+            seed,
+        )?;
         self.slots[i].record_eval(result)?;
         Ok(result)
     }
 
     /// Trains to the configured step count, the whole loop on a learner thread: acting and
-    /// updating (nearly all of a step) are learner work, and a loop on another thread handed
-    /// each over and waited for it, two thread wake-ups a step (a one-thread SAC run's updates/s
-    /// were 0.79–0.93 of `dhrl bench update`'s that way, 0.98–1.00 this way, on the EPYC).
-    /// The physics threads are the batch's own pool, as before.
+    /// updating, nearly all of a step, are learner work, which a loop elsewhere would hand over
+    /// and wait for twice a step (measured in docs/results/performance-amd-epyc.md).
     fn run(self, show_progress: bool) -> Result<Vec<Result<TrainSummary, TrainError>>, TrainError> {
         let pool = Arc::clone(&self.learner_pool);
         pool.install(move || self.run_here(show_progress))
@@ -924,6 +914,7 @@ impl Trainer {
         mut self,
         show_progress: bool,
     ) -> Result<Vec<Result<TrainSummary, TrainError>>, TrainError> {
+        debug_assert!(self.learner_pool.current_thread_index().is_some());
         // The runs share one schedule: every counter below moves alike in each of them.
         let c = self.slots[0].config.clone();
         let bar = Progress::new(

@@ -3,8 +3,8 @@
 //! burn runs it as thirteen elementwise ops, each a pass over the parameter and its moments,
 //! most into a fresh buffer: 9% of a SAC update on the EPYC. The state is burn's own
 //! `AdamState` (checkpoints are unchanged) and each value goes through the same f32 operations
-//! in the same order, so the bits are burn's (tested); anything but contiguous Flex f32
-//! tensors (wgpu, a view, a moment on another device) takes burn's step.
+//! in the same order, so the bits are burn's (tested); a tensor off the CPU backend (wgpu) or
+//! not f32 takes burn's step.
 use burn::backend::Flex;
 use burn::backend::flex::FlexTensor;
 use burn::optim::{
@@ -38,13 +38,14 @@ struct FusedAdam {
 
 /// The step's scalars, each computed as burn computes it (in f32).
 struct Coefficients {
-    /// `1 − β₁`, `1 − β₂`.
-    keep_1: f32,
-    keep_2: f32,
-    /// `√(1−β₂ᵗ)/(1−β₁ᵗ)`.
-    corrected: f32,
+    /// `1 − β₁`: the new gradient's weight in the first moment.
+    gradient_weight_1: f32,
+    /// `1 − β₂`: the squared gradient's weight in the second moment.
+    gradient_weight_2: f32,
+    /// `√(1−β₂ᵗ)/(1−β₁ᵗ)`: both bias corrections, on the first moment.
+    step_scale: f32,
     /// `ε·√(1−β₂ᵗ)`.
-    epsilon: f32,
+    scaled_epsilon: f32,
     learning_rate: f32,
 }
 
@@ -72,10 +73,10 @@ impl Optimizer for FusedAdam {
         let time = state.as_ref().map_or(1, |s| s.momentum.time + 1);
         let bias_correction_2 = (1.0 - BETA_2.powi(time as i32)).sqrt();
         let k = Coefficients {
-            keep_1: 1.0 - BETA_1,
-            keep_2: 1.0 - BETA_2,
-            corrected: bias_correction_2 / (1.0 - BETA_1.powi(time as i32)),
-            epsilon: self.epsilon * bias_correction_2,
+            gradient_weight_1: 1.0 - BETA_1,
+            gradient_weight_2: 1.0 - BETA_2,
+            step_scale: bias_correction_2 / (1.0 - BETA_1.powi(time as i32)),
+            scaled_epsilon: self.epsilon * bias_correction_2,
             learning_rate: lr as f32,
         };
         let grad = plain(grad);
@@ -162,12 +163,15 @@ mod kernels {
     #[inline(always)]
     fn entry(p: f32, m: f32, v: f32, g: f32, k: &Coefficients, first: bool) -> (f32, f32, f32) {
         let (m, v) = if first {
-            (g * k.keep_1, g * g * k.keep_2)
+            (g * k.gradient_weight_1, g * g * k.gradient_weight_2)
         } else {
-            (m * BETA_1 + g * k.keep_1, v * BETA_2 + g * g * k.keep_2)
+            (
+                m * BETA_1 + g * k.gradient_weight_1,
+                v * BETA_2 + g * g * k.gradient_weight_2,
+            )
         };
         (
-            p - m * k.corrected / (v.sqrt() + k.epsilon) * k.learning_rate,
+            p - m * k.step_scale / (v.sqrt() + k.scaled_epsilon) * k.learning_rate,
             m,
             v,
         )

@@ -103,14 +103,15 @@ impl Backward<Flex, 3> for LinearRelu {
     }
 }
 
-/// The layer's three gradients, `layer` giving its inputs and the gradient of its output
-/// (before any activation) from the op's state and the gradient it receives.
+/// The layer's three gradients; `inputs_and_gradient` gives its inputs and the gradient of its
+/// output before any activation, from the op's state and the gradient the op receives.
 fn backward<State>(
     ops: Ops<State, 3>,
     grads: &mut Gradients,
-    layer: impl FnOnce(State, FlexTensor) -> ([FlexTensor; 3], FlexTensor),
+    inputs_and_gradient: impl FnOnce(State, FlexTensor) -> ([FlexTensor; 3], FlexTensor),
 ) {
-    let ([x, weight, bias], grad) = layer(ops.state, grads.consume::<Flex>(&ops.node));
+    let ([x, weight, bias], grad) =
+        inputs_and_gradient(ops.state, grads.consume::<Flex>(&ops.node));
     let [to_x, to_weight, to_bias] = ops.parents;
     if let Some(parent) = to_bias {
         let rows = grad.layout().shape()[1];

@@ -1,12 +1,13 @@
 //! Ops that burn-flex runs slowly, written for the CPU learner as custom autodiff ops through
 //! burn's `extension` API: VDPO's GELU (libm's scalar `erff`) and layer norm (on the autodiff
 //! graph, burn composes it from eight elementwise ops and their backward passes, each a fresh
-//! allocation), and every algorithm's linear layer (burn zero-fills each product's buffer and
-//! adds the bias into another), dropout's product with a host-drawn mask (an upload and two fresh
-//! buffers in burn); beside them Adam's step as one pass (burn takes thirteen). The GELU and layer-norm loops are compiled for AVX-512 and AVX2
+//! allocation), every algorithm's linear layer with its ReLU (burn zero-fills each product's
+//! buffer, adds the bias into another, and ReLU takes a third), dropout's product with a
+//! host-drawn mask (an upload and two fresh buffers in burn); beside them Adam's step as one
+//! pass (burn takes thirteen). The GELU and layer-norm loops are compiled for AVX-512 and AVX2
 //! and picked at run time, in plain multiplies and adds with sums over fixed lanes, so every
-//! instruction set computes the same bits; the linear layer keeps burn's bits. Tensors
-//! elsewhere (wgpu, gradient checkpointing) take burn's ops.
+//! instruction set computes the same bits; the other ops keep burn's bits. Tensors elsewhere
+//! (wgpu, gradient checkpointing) take burn's ops.
 use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::ops::{Backward, OpsKind};
 use burn::backend::flex::FlexTensor;
