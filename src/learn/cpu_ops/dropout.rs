@@ -10,7 +10,7 @@ use burn::backend::flex::FlexTensor;
 use burn::backend::{Autodiff, Flex};
 use burn::prelude::{Tensor, TensorData};
 
-use super::{Route, flex, on_graph_keeping, plain, route, tracked, values, writable};
+use super::{Route, flex, on_graph_keeping, plain, route, tracked, values, zip_with};
 use crate::learn::upload;
 
 /// `x · mask` elementwise, `mask` one entry per entry of `x` in row-major order;
@@ -56,18 +56,7 @@ impl Backward<Flex, 1> for TimesMask {
 
 /// `x · mask` of a Flex tensor, written over `x` when nothing else holds its buffer.
 fn product(x: FlexTensor, mask: &[f32]) -> FlexTensor {
-    match writable(x) {
-        Ok(mut x) => {
-            for (value, &m) in x.storage_mut::<f32>().iter_mut().zip(mask) {
-                *value *= m;
-            }
-            x
-        }
-        Err(x) => {
-            let out = values(&x).iter().zip(mask).map(|(&v, &m)| v * m).collect();
-            flex(out, x.layout().shape().clone())
-        }
-    }
+    zip_with(x, mask, |value, m| value * m)
 }
 
 #[cfg(test)]

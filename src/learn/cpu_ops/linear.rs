@@ -17,46 +17,42 @@ use burn::backend::ops::FloatTensorOps;
 use burn::backend::{Autodiff, Flex};
 use burn::prelude::Tensor;
 use burn::tensor::Shape;
-use burn::tensor::activation::relu;
+use burn::tensor::activation;
 use rayon::prelude::*;
 
-use super::{Route, flex, on_graph, on_graph_keeping, plain, route, tracked, values, writable};
+use super::{Route, flex, on_graph_keeping, plain, route, tracked, values, zip_with};
 
 /// `x` `[S, B, in]` times each run's `weight` `[S, in, out]` plus its `bias` `[S, out]`:
 /// `[S, B, out]`, differentiable in all three where they are.
 pub fn linear(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
-    match [route(&x), route(&weight), route(&bias)] {
-        [Route::Plain, Route::Plain, Route::Plain] if ours(&x, &weight, &bias) => {
-            Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(weight), plain(bias)], false))
-        }
-        [Route::Tracked, Route::Tracked, Route::Tracked] if ours(&x, &weight, &bias) => {
-            Tensor::from_primitive::<Autodiff<Flex>>(on_graph(
-                Linear,
-                [tracked(x), tracked(weight), tracked(bias)],
-                |inputs| forward(inputs, false),
-            ))
-        }
-        _ => composed(x, weight, bias),
-    }
+    layer(x, weight, bias, false)
 }
 
 /// `relu(linear(x, weight, bias))`: a hidden layer.
 pub fn linear_relu(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
+    layer(x, weight, bias, true)
+}
+
+/// The layer, with its ReLU when `relu`.
+fn layer(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>, relu: bool) -> Tensor<3> {
     match [route(&x), route(&weight), route(&bias)] {
         [Route::Plain, Route::Plain, Route::Plain] if ours(&x, &weight, &bias) => {
-            Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(weight), plain(bias)], true))
+            Tensor::from_primitive::<Flex>(forward(&[plain(x), plain(weight), plain(bias)], relu))
         }
         [Route::Tracked, Route::Tracked, Route::Tracked] if ours(&x, &weight, &bias) => {
             Tensor::from_primitive::<Autodiff<Flex>>(on_graph_keeping(
-                LinearRelu,
+                Linear,
                 [tracked(x), tracked(weight), tracked(bias)],
                 |inputs| {
-                    let output = forward(&inputs, true);
-                    (output.clone(), (inputs, output))
+                    let output = forward(&inputs, relu);
+                    // ReLU's backward pass reads where its output was above 0.
+                    let relu_output = relu.then(|| output.clone());
+                    (output, (inputs, relu_output))
                 },
             ))
         }
-        _ => relu(composed(x, weight, bias)),
+        _ if relu => activation::relu(composed(x, weight, bias)),
+        _ => composed(x, weight, bias),
     }
 }
 
@@ -72,89 +68,55 @@ fn composed(x: Tensor<3>, weight: Tensor<3>, bias: Tensor<2>) -> Tensor<3> {
     x.matmul(weight) + bias.unsqueeze_dim(1)
 }
 
-/// Its state is the inputs `[x, W, b]` (b for its shape).
+/// Its state is the inputs `[x, W, b]` (b for its shape) and, after a ReLU, the output.
 #[derive(Debug)]
 struct Linear;
 
 impl Backward<Flex, 3> for Linear {
-    type State = [FlexTensor; 3];
-
-    fn backward(self, ops: Ops<[FlexTensor; 3], 3>, grads: &mut Gradients, _: &mut Checkpointer) {
-        backward(ops, grads, |inputs, grad| (inputs, grad));
-    }
-}
-
-/// Its state is the inputs and the output (where ReLU passed the gradient).
-#[derive(Debug)]
-struct LinearRelu;
-
-impl Backward<Flex, 3> for LinearRelu {
-    type State = ([FlexTensor; 3], FlexTensor);
+    type State = ([FlexTensor; 3], Option<FlexTensor>);
 
     fn backward(
         self,
-        ops: Ops<([FlexTensor; 3], FlexTensor), 3>,
+        ops: Ops<([FlexTensor; 3], Option<FlexTensor>), 3>,
         grads: &mut Gradients,
         _: &mut Checkpointer,
     ) {
-        backward(ops, grads, |(inputs, output), grad| {
-            (inputs, relu_gradient(&output, grad))
-        });
-    }
-}
-
-/// The layer's three gradients; `inputs_and_gradient` gives its inputs and the gradient of its
-/// output before any activation, from the op's state and the gradient the op receives.
-fn backward<State>(
-    ops: Ops<State, 3>,
-    grads: &mut Gradients,
-    inputs_and_gradient: impl FnOnce(State, FlexTensor) -> ([FlexTensor; 3], FlexTensor),
-) {
-    let ([x, weight, bias], grad) =
-        inputs_and_gradient(ops.state, grads.consume::<Flex>(&ops.node));
-    let [to_x, to_weight, to_bias] = ops.parents;
-    if let Some(parent) = to_bias {
-        let rows = grad.layout().shape()[1];
-        // burn sums over the broadcast axis only where it is broadcast (B > 1).
-        let summed = if rows > 1 {
-            Flex::float_sum_dim(grad.clone(), 1)
-        } else {
-            grad.clone()
+        let ([x, weight, bias], relu_output) = ops.state;
+        let grad = grads.consume::<Flex>(&ops.node);
+        let grad = match &relu_output {
+            Some(output) => relu_gradient(output, grad),
+            None => grad,
         };
-        let shape = bias.layout().shape().clone();
-        grads.register::<Flex>(parent.id, Flex::float_reshape(summed, shape));
-    }
-    if let Some(parent) = to_x {
-        let (dx, shape) = product(&grad, &weight.transpose(1, 2));
-        grads.register::<Flex>(parent.id, flex(dx, shape));
-    }
-    if let Some(parent) = to_weight {
-        let (dweight, shape) = product(&x.transpose(1, 2), &grad);
-        grads.register::<Flex>(parent.id, flex(dweight, shape));
+        let [to_x, to_weight, to_bias] = ops.parents;
+        // burn's order: the add's backward (the bias), then the product's (x, then W).
+        if let Some(parent) = to_bias {
+            let rows = grad.layout().shape()[1];
+            // burn sums over the broadcast axis only where it is broadcast (B > 1).
+            let summed = if rows > 1 {
+                Flex::float_sum_dim(grad.clone(), 1)
+            } else {
+                grad.clone()
+            };
+            let shape = bias.layout().shape().clone();
+            grads.register::<Flex>(parent.id, Flex::float_reshape(summed, shape));
+        }
+        if let Some(parent) = to_x {
+            let (dx, shape) = product(&grad, &weight.transpose(1, 2));
+            grads.register::<Flex>(parent.id, flex(dx, shape));
+        }
+        if let Some(parent) = to_weight {
+            let (dweight, shape) = product(&x.transpose(1, 2), &grad);
+            grads.register::<Flex>(parent.id, flex(dweight, shape));
+        }
     }
 }
 
 /// `grad` where ReLU's `output` passed it (above 0, or NaN), 0 elsewhere: burn-flex's
 /// `relu_backward`, written over `grad` when nothing else holds it.
 fn relu_gradient(output: &FlexTensor, grad: FlexTensor) -> FlexTensor {
-    let passes = |out: f32, g: f32| if out.is_nan() || out > 0.0 { g } else { 0.0 };
-    let output = values(output);
-    match writable(grad) {
-        Ok(mut grad) => {
-            for (g, &out) in grad.storage_mut::<f32>().iter_mut().zip(output.iter()) {
-                *g = passes(out, *g);
-            }
-            grad
-        }
-        Err(grad) => {
-            let masked = values(&grad)
-                .iter()
-                .zip(output.iter())
-                .map(|(&g, &out)| passes(out, g))
-                .collect();
-            flex(masked, grad.layout().shape().clone())
-        }
-    }
+    zip_with(grad, &values(output), |g, out| {
+        if out.is_nan() || out > 0.0 { g } else { 0.0 }
+    })
 }
 
 /// The layer's output, its ReLU applied as the bias is added when `relu` (burn-flex's: a NaN

@@ -138,6 +138,27 @@ fn writable(mut x: FlexTensor) -> Result<FlexTensor, FlexTensor> {
     }
 }
 
+/// `f(x, other)` entry by entry, `other` in `x`'s row-major order, written over `x` when nothing
+/// else holds its buffer.
+fn zip_with(x: FlexTensor, other: &[f32], f: impl Fn(f32, f32) -> f32) -> FlexTensor {
+    match writable(x) {
+        Ok(mut x) => {
+            for (value, &o) in x.storage_mut::<f32>().iter_mut().zip(other) {
+                *value = f(*value, o);
+            }
+            x
+        }
+        Err(x) => {
+            let out = values(&x)
+                .iter()
+                .zip(other)
+                .map(|(&v, &o)| f(v, o))
+                .collect();
+            flex(out, x.layout().shape().clone())
+        }
+    }
+}
+
 /// The tensor's values in row-major order (borrowed when its layout already is that).
 fn values(x: &FlexTensor) -> std::borrow::Cow<'_, [f32]> {
     match x.as_slice::<f32>() {
