@@ -3,8 +3,9 @@
 # row dhrl's figure beside its anchor timed in the same run and their ratio, under the CPU's
 # name and the commit. Run it alone on the machine (they are shared and noisy: run it twice and
 # report the range). Needs torch and envpool in .deps/venv (`.deps/venv/bin/pip install torch
-# envpool`); builds the binary and the Python extension when they are missing. About 15 minutes
-# on 2 cores.
+# envpool`); builds the binary and the Python extension from the checkout first (nothing to do
+# when they are current), so that the figures are the named commit's. About 15 minutes on 2
+# cores.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 py=.deps/venv/bin/python dhrl=target/release/dhrl
@@ -13,11 +14,9 @@ if ! "$py" -c "import torch, envpool" 2>/dev/null; then
     echo "bench_performance.sh: needs torch and envpool in .deps/venv: .deps/venv/bin/pip install torch envpool" >&2
     exit 2
 fi
-[[ -x $dhrl ]] || cargo build --release --features wgpu-learner --bin dhrl
-if [[ ! -f python/dhrl/_dhrl.abi3.so ]]; then
-    PYO3_PYTHON="$PWD/$py" cargo build --release --features wgpu-learner -p dhrl-python
-    cp target/release/lib_dhrl.so python/dhrl/_dhrl.abi3.so
-fi
+cargo build --quiet --release --features wgpu-learner --bin dhrl
+PYO3_PYTHON="$PWD/$py" cargo build --quiet --release --features wgpu-learner -p dhrl-python
+cp target/release/lib_dhrl.so python/dhrl/_dhrl.abi3.so
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 # Prints `| what | dhrl | anchor | ratio (target) |` from one JSON report on stdin.
@@ -29,7 +28,9 @@ r = json.loads(sys.stdin.read())
 print(f"| {what} | {r[ours]:,.1f} {unit} | {r[anchor]:,.1f} {unit} | {r[ours] / r[anchor]:.2f} (goal {target}) |")' "$@"
 }
 
-echo "## $(date -u +%F), $(git rev-parse --short HEAD), \"$(lscpu | sed -n 's/^Model name: *//p' | head -1)\", $(nproc) cores"
+commit=$(git rev-parse --short HEAD)
+[[ -z $(git status --porcelain --untracked-files=no) ]] || commit="$commit with uncommitted changes"
+echo "## $(date -u +%F), $commit, \"$(lscpu | sed -n 's/^Model name: *//p' | head -1)\", $(nproc) cores"
 echo
 echo "| what | dhrl | anchor, same run | ratio |"
 echo "|---|---|---|---|"
