@@ -32,7 +32,7 @@ def test_json_rows_hold_every_measured_cell():
         ("InvertedPendulum-v4", 3, 2),
     ]
     for row in rows:
-        for cell in ("raw", "ceiling", "dhrl_native_delayed", "dhrl_delay0", "dhrl_delayed", "gym_sync"):
+        for cell in ("raw", "ceiling", "dhrl_native_delayed", "dhrl_python_delayed_same_step", "dhrl_delay0", "dhrl_delayed", "gym_sync"):
             assert row[cell] > 0, (cell, row)
         assert row["cpu"] and row["threads"] == 2
     assert rows[0]["gym_async"] > 0
