@@ -216,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     delay = args.delay
     header = (
         f"| task | copies | raw mj_step (1 copy, 1 thread) | ceiling ({args.threads} raw loops) "
-        f"| dhrl Rust Δ={delay} | dhrl Python Δ={delay} same-step | dhrl Δ=0 | dhrl Δ={delay} "
+        f"| dhrl Rust Δ={delay} | dhrl Python Δ={delay} same-step | dhrl Python Δ=0 | dhrl Python Δ={delay} "
         f"| Gymnasium Sync Δ={delay} | Gymnasium Async Δ={delay} | EnvPool Δ=0 "
         f"| Python / Rust (Δ={delay}) | Rust / raw | ceiling / raw | Rust / ceiling "
         f"| dhrl Δ={delay} / best Gymnasium | dhrl / EnvPool (Δ=0) | Δ={delay} / Δ=0 |"
