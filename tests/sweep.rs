@@ -5,6 +5,7 @@
 #![cfg(feature = "cli")]
 mod common;
 
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -367,24 +368,60 @@ fn a_run_stopped_by_sigterm_checkpoints_and_resumes_to_the_same_result() {
     assert_same_logs(&run_dir, &whole);
 }
 
+/// `dhrl sweep run` stopped by SIGTERM passes the stop on to its running runs, which
+/// checkpoint and exit, and the next start ends them as if they had run in one go. The runs
+/// are frozen (SIGSTOP) from the first checkpoint until the runner has passed the stop on, so
+/// that no run can end in between however fast the machine: the hand-over is tested, not a
+/// race against 400 training steps.
 #[test]
 fn a_runner_stopped_by_sigterm_stops_its_runs_with_checkpoints() {
     let dir = tempfile::tempdir().unwrap();
     let sweep = plan_tiny(dir.path());
     let folder = sweep.dir.to_str().unwrap().to_string();
-    let runner = start_runner(&folder, &[]);
+    let mut runner = start_runner(&folder, &[]);
     wait_for_a_checkpoint(&sweep, &sweep.runs);
+    let runner_pid = runner.id().to_string();
+    let signal_runs = |signal: &str| {
+        Command::new("pkill")
+            .args([signal, "-P", &runner_pid])
+            .status()
+            .unwrap()
+    };
+    signal_runs("-STOP");
     Command::new("kill")
-        .args(["-TERM", &runner.id().to_string()])
+        .args(["-TERM", &runner_pid])
         .status()
         .unwrap();
+    // The runner says so once it has sent SIGTERM to its (frozen) runs; its runs go on after
+    // that line, or after two minutes without it (then the assertions below say what it did).
+    let (said_tx, said_rx) = std::sync::mpsc::channel();
+    let stderr = runner.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines() {
+            said_tx.send(line.unwrap()).unwrap();
+        }
+    });
+    let mut said = Vec::new();
+    while let Ok(line) = said_rx.recv_timeout(Duration::from_secs(120)) {
+        let passed_on = line.starts_with("stopping:");
+        said.push(line);
+        if passed_on {
+            break;
+        }
+    }
+    signal_runs("-CONT");
     let out = runner.wait_with_output().unwrap();
-    let printed = String::from_utf8_lossy(&out.stdout);
+    reader.join().unwrap();
+    said.extend(said_rx.try_iter());
+    let printed = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        said.join("\n")
+    );
     assert_eq!(
         out.status.code(),
         Some(dhrl::sweep::EXIT_INTERRUPTED),
-        "{printed}{}",
-        String::from_utf8_lossy(&out.stderr)
+        "{printed}"
     );
     let stopped: Vec<_> = sweep
         .runs

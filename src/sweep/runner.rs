@@ -5,7 +5,7 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::Child;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::SweepError;
 use super::manifest::{ManifestRun, RunOutcome, RunState, Sweep};
@@ -207,6 +207,16 @@ pub struct LocalSummary {
 const TICK: Duration = Duration::from_millis(500);
 const BUSY_RETRIES: u32 = 10;
 
+/// Sleeps one [`TICK`], cut short when `stop` is set while the runner is not `stopping` yet:
+/// the children hear the runner's stop within milliseconds, not up to a tick later (a
+/// cluster's grace time between its SIGTERM and its SIGKILL is short).
+fn wait_a_tick(stop: &AtomicBool, stopping: bool) {
+    let start = Instant::now();
+    while start.elapsed() < TICK && (stopping || !stop.load(Ordering::Relaxed)) {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
 /// Runs every run of `sweep` that has not finished, `jobs` processes at a time: with `stack`
 /// 1 each run in its own child process, with `stack` S the runs in the groups of
 /// [`stack_groups`], one child per group, from `spawn(unit, log)` (which runs [`run_one`] on
@@ -302,7 +312,7 @@ pub fn run_local(
                 })?;
             running.push((unit, child));
         }
-        std::thread::sleep(TICK);
+        wait_a_tick(stop, stopping);
         let mut k = 0;
         while k < running.len() {
             let exited = running[k].1.try_wait().map_err(|e| SweepError::Io {
