@@ -74,12 +74,14 @@ the ratio dhrl / torch. `--torch-only` skips dhrl (when target/release/dhrl is n
 one more `bc_every` period of PyTorch updates (one burst) with torch.profiler, counts the
 products' FLOPs (mm, addmm, bmm, baddbmm), then runs exactly those products again, back to back
 on operands of the recorded shapes (contiguous) and nothing else, best of five. So the same
-update cannot run faster than `products_ms` at this core's sgemm rate whatever the framework,
-and `torch_ms_per_update / products_ms` is the most any implementation of the same arithmetic
-could beat PyTorch by; `other_ms_at_1_5x` is what a 1.5× implementation may spend on everything
-that is not a product (layer norms, activations, softmax, dropout, losses, Adam, allocation),
-against PyTorch's `torch_other_ms` and dhrl's `dhrl_other_ms` (its total less the same products,
-at MKL's rate; dhrl's gemm runs at about that rate: docs/results/performance-xeon.md).
+update cannot run faster than `products_ms` at PyTorch's sgemm rate on this core whatever the
+framework, and `torch_ms_per_update / products_ms` is the most any implementation of the same
+arithmetic at that rate could beat PyTorch by; `other_ms_at_1_5x` is what a 1.5× implementation
+may spend on everything that is not a product (layer norms, activations, softmax, dropout,
+losses, Adam, allocation), against PyTorch's `torch_other_ms` and dhrl's `dhrl_other_ms` (its
+total less the same products at PyTorch's rate). dhrl's gemm runs at about that rate on the
+Xeon (docs/results/performance-xeon.md) and faster on the EPYC, where `other_ms_at_1_5x` and
+`dhrl_other_ms` come out negative: there 1.5× needs faster products than PyTorch's.
 """
 import argparse
 import json
