@@ -167,7 +167,9 @@ fn killed_run_resumes_to_the_uninterrupted_run() {
             .output()
             .unwrap());
 
-        // Start the same run, kill it once its first checkpoint is on disk, resume it.
+        // Start the same run, kill it once train.csv has its first row (step 1,299, after 1,000
+        // updates): past the checkpoint of step 1,000, so that the resumed run redoes steps,
+        // and ~700 steps (about a second here) before the run would end.
         let mut child = Command::new(env!("CARGO_BIN_EXE_dhrl"))
             .args(with_out(&killed))
             .stdout(Stdio::null())
@@ -175,14 +177,14 @@ fn killed_run_resumes_to_the_uninterrupted_run() {
             .spawn()
             .unwrap();
         let start = Instant::now();
-        while !killed.join("checkpoint/state.json").exists() {
+        let log = killed.join("train.csv");
+        while std::fs::read_to_string(&log).map_or(0, |t| t.lines().count()) < 2 {
             assert!(
                 start.elapsed() < Duration::from_secs(300),
-                "no checkpoint appeared"
+                "{algo}: no train.csv row appeared"
             );
-            std::thread::sleep(Duration::from_millis(20));
+            std::thread::sleep(Duration::from_millis(5));
         }
-        std::thread::sleep(Duration::from_millis(700));
         assert!(
             child.try_wait().unwrap().is_none(),
             "{algo}: the run finished before it could be killed; the test would prove nothing"
