@@ -80,8 +80,9 @@ arithmetic at that rate could beat PyTorch by; `other_ms_at_1_5x` is what a 1.5�
 may spend on everything that is not a product (layer norms, activations, softmax, dropout,
 losses, Adam, allocation), against PyTorch's `torch_other_ms` and dhrl's `dhrl_other_ms` (its
 total less the same products at PyTorch's rate). dhrl's gemm runs at about that rate on the
-Xeon (docs/results/performance-xeon.md) and faster on the EPYC, where `other_ms_at_1_5x` and
-`dhrl_other_ms` come out negative: there 1.5× needs faster products than PyTorch's.
+Xeon (docs/results/performance-xeon.md) and faster on the EPYC, where `dhrl_other_ms` comes out
+negative; there PyTorch's products alone also take more than its update time / 1.5, so
+`other_ms_at_1_5x` is negative too: 1.5× needs faster products than PyTorch's.
 """
 import argparse
 import json
