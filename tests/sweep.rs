@@ -319,14 +319,10 @@ fn a_run_stopped_by_sigterm_checkpoints_and_resumes_to_the_same_result() {
     wait_for_a_checkpoint(&sweep, std::slice::from_ref(run));
     // And for a first train.csv row (step 300 of 600), so that there is a log to keep.
     let log = sweep.run_dir(run).join("train.csv");
-    let start = Instant::now();
-    while std::fs::read_to_string(&log).map_or(0, |t| t.lines().count()) < 2 {
-        assert!(
-            start.elapsed() < Duration::from_secs(120),
-            "no train.csv row within 2 min"
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    assert!(
+        common::wait_for_a_log_row(&log, Duration::from_secs(120)),
+        "no train.csv row within 2 min"
+    );
     Command::new("kill")
         .args(["-TERM", &child.id().to_string()])
         .status()

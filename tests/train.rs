@@ -176,15 +176,10 @@ fn killed_run_resumes_to_the_uninterrupted_run() {
             .stderr(Stdio::null())
             .spawn()
             .unwrap();
-        let start = Instant::now();
-        let log = killed.join("train.csv");
-        while std::fs::read_to_string(&log).map_or(0, |t| t.lines().count()) < 2 {
-            assert!(
-                start.elapsed() < Duration::from_secs(300),
-                "{algo}: no train.csv row appeared"
-            );
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        assert!(
+            common::wait_for_a_log_row(&killed.join("train.csv"), Duration::from_secs(300)),
+            "{algo}: no train.csv row appeared"
+        );
         assert!(
             child.try_wait().unwrap().is_none(),
             "{algo}: the run finished before it could be killed; the test would prove nothing"

@@ -5,6 +5,7 @@ pub mod slurm;
 
 use std::path::Path;
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::prelude::Tensor;
@@ -62,6 +63,19 @@ pub fn train(args: &[&str], run: &Path) {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// Waits until the CSV log at `path` has a row below its header, polling every 5 ms: true
+/// once it has, false if it has none within `within`.
+pub fn wait_for_a_log_row(path: &Path, within: Duration) -> bool {
+    let start = Instant::now();
+    while std::fs::read_to_string(path).map_or(0, |t| t.lines().count()) < 2 {
+        if start.elapsed() >= within {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    true
 }
 
 /// Column `name` of a CSV file.
