@@ -9,6 +9,7 @@ pub mod files;
 pub mod float_mode;
 pub mod learn;
 pub mod progress;
+pub mod protocol;
 #[cfg(feature = "cli")]
 pub mod report;
 pub mod rollout;

@@ -11,11 +11,15 @@ use std::sync::Mutex;
 use burn::prelude::*;
 use common::{parameters, small_spec as spec, update};
 use dhrl::algos::{
-    ActMode, Agent, AgentSpec, Bpql, D2hpg, D2hpgConfig, InputView, Regular, SacAgent, SacConfig,
-    SacLearner, random_batch,
+    ActMode, Agent, AgentSpec, AlgoSettings, Bpql, D2hpg, D2hpgConfig, InputView, LiftingNoise,
+    LiftingReduction, LiftingSchedule, Regular, SacAgent, SacBatch, SacConfig, SacLearner,
+    random_batch,
 };
 use dhrl::delay::Transitions;
-use dhrl::learn::{Devices, LearnDevice, Noise, lifting_loss, matrix, to_vec};
+use dhrl::learn::{
+    Devices, LearnDevice, NetworkInit, Noise, TransitionTensors, lifting_loss, matrix, to_vec,
+};
+use dhrl::protocol::Protocol;
 
 /// burn's generator is process-wide: networks built by concurrent tests would interleave draws.
 static BUILD: Mutex<()> = Mutex::new(());
@@ -307,4 +311,239 @@ fn bpql_and_d2hpg_learn_where_broken_variants_do_not() {
              broken variants (≤ 17)\n{text}"
         );
     }
+}
+
+/// The authors' λ over a run of 20,000 steps: 10 to 25% of it (step 5,000 included), linear to
+/// 0 at 75%, 0 after; dhrl's constant. The budget is the run's own, fixed when it starts.
+#[test]
+fn the_authors_lifting_weight_holds_then_decays_over_the_budget() {
+    let authors = D2hpgConfig::protocol_defaults(Protocol::Authors).with_budget(20_000);
+    assert_eq!(authors.lifting_schedule, LiftingSchedule::HoldDecay);
+    for (step, weight) in [
+        (0, 10.0),
+        (4_980, 10.0), // 24.9%
+        (5_000, 10.0),
+        (10_000, 5.0), // 50%
+        (12_500, 2.5),
+        (15_000, 0.0), // 75%
+        (20_000, 0.0), // 100%
+        (40_000, 0.0), // an extension's steps
+    ] {
+        let at = authors.lifting_weight_at(step);
+        assert!((at - weight).abs() < 1e-12, "λ at step {step}: {at}, not {weight}");
+    }
+    // Fixed once: a later budget (an extended run) leaves the schedule where it was.
+    assert_eq!(authors.with_budget(40_000).lifting_budget, 20_000);
+    assert_eq!(authors.scheduled_budget(), Some(20_000));
+    let dhrl = D2hpgConfig::protocol_defaults(Protocol::Dhrl).with_budget(20_000);
+    assert_eq!(dhrl.lifting_budget, 0, "a constant λ is fixed to no budget");
+    assert_eq!(dhrl.scheduled_budget(), None);
+    for step in [0, 10_000, 20_000] {
+        assert_eq!(dhrl.lifting_weight_at(step), 1.0);
+    }
+    // What each protocol sets, through the registry (as `--protocol` reads it).
+    let fields = AlgoSettings::under(Protocol::Authors, "d2hpg", &toml::Table::new())
+        .unwrap()
+        .fields();
+    for (field, value) in [
+        ("lifting_weight", toml::Value::Float(10.0)),
+        ("lifting_samples", toml::Value::Integer(100)),
+        ("lifting_noise", toml::Value::String("independent".into())),
+        ("lifting_reduction", toml::Value::String("mean".into())),
+        ("shared_temperature", toml::Value::Boolean(true)),
+        ("network_init", toml::Value::String("orthogonal".into())),
+    ] {
+        assert_eq!(fields[field], value, "d2hpg's {field} under the authors' protocol");
+    }
+    let naive = AlgoSettings::under(Protocol::Authors, "d2hpg-naive", &toml::Table::new())
+        .unwrap()
+        .fields();
+    assert_eq!(naive["lifting_schedule"].as_str(), Some("constant"));
+    assert_eq!(naive["autotune_alpha"].as_bool(), Some(false), "their naive α stays at 0.2");
+    assert_eq!(naive["lifting_weight"].as_float(), Some(10.0));
+    let bpql = AlgoSettings::under(Protocol::Authors, "bpql", &toml::Table::new())
+        .unwrap()
+        .fields();
+    assert_eq!(bpql["network_init"].as_str(), Some("orthogonal"));
+    assert!(AlgoSettings::under(Protocol::Authors, "d2hpg-principled", &toml::Table::new()).is_err());
+}
+
+/// At Δ = 0 with the regular policy set to the delay-free one, L_lift compares one
+/// distribution with itself: with common noise its two sets of samples are the same numbers,
+/// so the loss is 0; with independent noise they are two draws, and the loss is their sampling
+/// spread — larger under the sum over action dimensions than under the mean, by dim(A).
+#[test]
+fn the_lifting_draws_are_common_or_independent_as_configured() {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let (spec, d) = (spec(0), devices());
+    let loss = |noise: LiftingNoise, reduction: LiftingReduction| {
+        let config = D2hpgConfig {
+            lifting_noise: noise,
+            lifting_reduction: reduction,
+            ..lifting(1.0, 8)
+        };
+        let mut agent = D2hpg::new(Regular::Bpql, &config, &spec, &d, &[3]);
+        let dir = tempfile::tempdir().unwrap();
+        agent.save(dir.path()).unwrap();
+        std::fs::copy(
+            dir.path().join("delay_free_actor.bpk"),
+            dir.path().join("regular_actor.bpk"),
+        )
+        .unwrap();
+        agent.load(dir.path()).unwrap();
+        // At Δ = 0 the augmented state is the state.
+        let mut b = batch(&spec, 64, 5);
+        b.augmented = b.state.clone();
+        b.next_augmented = b.next_state.clone();
+        let stats = update(&mut agent, &b);
+        stats.iter().find(|(n, _)| *n == "lifting_loss").unwrap().1
+    };
+    let common = loss(LiftingNoise::Common, LiftingReduction::Sum);
+    assert!(common.abs() < 1e-9, "one distribution, common noise: L_lift = {common}");
+    let (summed, averaged) = (
+        loss(LiftingNoise::Independent, LiftingReduction::Sum),
+        loss(LiftingNoise::Independent, LiftingReduction::Mean),
+    );
+    assert!(summed > 1e-3, "independent draws of one distribution: L_lift = {summed}");
+    assert!(
+        (summed - 2.0 * averaged).abs() < 1e-6 * summed,
+        "the mean over 2 action dimensions is half the sum: {summed} vs {averaged}"
+    );
+}
+
+/// One α (the authors' code): the delay-free learner's entropy terms read the regular
+/// learner's α, which only the regular policy's entropy tunes. After a few updates the two α
+/// differ from where a learner of its own would be; the next update of the delay-free learner
+/// equals, in every parameter and noise state, a copy of it stepped with the regular α
+/// borrowed, and not a copy stepped with its own.
+#[test]
+fn the_delay_free_learner_reads_the_regular_alpha_when_one_is_shared() {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let (spec, d) = (spec(2), devices());
+    let (obs, aug) = (spec.obs_dim, spec.augmented_dim());
+    let config = D2hpgConfig {
+        shared_temperature: true,
+        ..lifting(1.0, 4)
+    };
+    let mut agent = D2hpg::new(Regular::Bpql, &config, &spec, &d, &[8]);
+    for step in 0..6 {
+        update(&mut agent, &batch(&spec, 32, 40 + step));
+    }
+    let before = tempfile::tempdir().unwrap();
+    agent.save(before.path()).unwrap();
+    let regular = saved_learner(before.path(), "regular_", aug, obs, &spec);
+    let free = |borrow: bool| {
+        let mut copy = saved_learner(before.path(), "delay_free_", obs, obs, &spec);
+        if borrow {
+            copy.borrowed_alpha = Some(regular.temperature.alpha_tensor());
+        }
+        copy
+    };
+    let (regular_alpha, own_alpha) = (regular.temperature.alphas()[0], free(false).temperature.alphas()[0]);
+    assert!((own_alpha - 0.2).abs() < 1e-6, "the delay-free α was tuned: {own_alpha}");
+    assert!((regular_alpha - 0.2).abs() > 1e-5, "the regular α did not move: {regular_alpha}");
+
+    let b = batch(&spec, 32, 99);
+    let stats = update(&mut agent, &b);
+    let free_alpha = stats.iter().find(|(n, _)| *n == "free_alpha").unwrap().1;
+    assert!((free_alpha - regular_alpha).abs() < 1e-6, "free_alpha logs {free_alpha}");
+    let after = tempfile::tempdir().unwrap();
+    agent.save(after.path()).unwrap();
+    let stepped = saved_learner(after.path(), "delay_free_", obs, obs, &spec);
+    let state = TransitionTensors::stacked(std::slice::from_ref(&b), &d.plain);
+    let on_state = (state.state.clone(), state.next_state.clone());
+    let sac_batch = SacBatch::new(&state, on_state.clone(), on_state);
+    let (mut borrowing, mut own) = (free(true), free(false));
+    borrowing.update(&sac_batch);
+    own.update(&sac_batch);
+    assert!(
+        learner_state(&stepped) == learner_state(&borrowing),
+        "the delay-free learner did not step with the regular α"
+    );
+    assert!(
+        parameters(&stepped.critic) != parameters(&own.critic),
+        "its own α gives the same step: the test cannot tell the two apart"
+    );
+}
+
+/// D2HPG-SAC's regular learner is augmented SAC, its critic on `x`: without lifting its
+/// regular policy is exactly augmented SAC's, and not BPQL's (whose critic reads `s`).
+#[test]
+fn d2hpg_sac_without_lifting_is_augmented_sac_whose_critic_reads_x() {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let (spec, hyper, d, seed) = (spec(3), SacConfig::default(), devices(), 13);
+    let mut d2hpg_sac = D2hpg::new(Regular::AugmentedSac, &lifting(0.0, 4), &spec, &d, &[seed]);
+    let mut augmented = SacAgent::new(InputView::Augmented, &spec, &hyper, &d, seed);
+    let mut bpql = Bpql::new(&spec, &hyper, &d, seed);
+    for step in 0..4 {
+        let b = batch(&spec, 32, 300 + step);
+        update(&mut d2hpg_sac, &b);
+        update(&mut augmented, &b);
+        update(&mut bpql, &b);
+    }
+    let probe = batch(&spec, 8, 17);
+    let acts = d2hpg_sac.act(&probe.augmented, 8, ActMode::Deterministic);
+    assert_eq!(acts, augmented.act(&probe.augmented, 8, ActMode::Deterministic));
+    assert_ne!(acts, bpql.act(&probe.augmented, 8, ActMode::Deterministic));
+}
+
+/// Orthogonal initialisation (the authors' `orthogonal_`, gain 1): every layer of the actor and
+/// the critics has orthonormal columns in its short direction (`WᵀW = I` for a layer with more
+/// inputs than outputs, `WWᵀ = I` otherwise) and zero biases; burn's draw has neither.
+#[test]
+fn orthogonal_layers_are_orthonormal_with_zero_biases() {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let (spec, d) = (spec(2), devices());
+    let learner = |init: NetworkInit| {
+        let hyper = SacConfig {
+            network_init: init,
+            ..SacConfig::default()
+        };
+        SacLearner::new(spec.augmented_dim(), spec.obs_dim, &spec, &hyper, &d, 5)
+    };
+    struct Layers(Vec<(Vec<usize>, Vec<f32>)>);
+    impl burn::module::ModuleVisitor for Layers {
+        fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+            self.0.push((param.val().dims().to_vec(), to_vec(param.val())));
+        }
+    }
+    let layers = |l: &SacLearner| {
+        let mut all = Layers(Vec::new());
+        burn::module::Module::visit(&l.actor, &mut all);
+        burn::module::Module::visit(&l.critic, &mut all);
+        all.0
+    };
+    let orthonormal = |dims: &[usize], w: &[f32]| -> f64 {
+        // The largest distance from the identity of the short direction's Gram matrix.
+        let (input, output) = (dims[1], dims[2]);
+        let (n, at): (usize, Box<dyn Fn(usize, usize) -> f64>) = if input >= output {
+            (output, Box::new(|r, c| f64::from(w[r * output + c])))
+        } else {
+            (input, Box::new(|r, c| f64::from(w[c * output + r])))
+        };
+        let long = input.max(output);
+        let mut worst: f64 = 0.0;
+        for a in 0..n {
+            for b in 0..n {
+                let dot: f64 = (0..long).map(|r| at(r, a) * at(r, b)).sum();
+                worst = worst.max((dot - if a == b { 1.0 } else { 0.0 }).abs());
+            }
+        }
+        worst
+    };
+    let drawn = layers(&learner(NetworkInit::Orthogonal));
+    assert_eq!(drawn.iter().filter(|(d, _)| d.len() == 3).count(), 10, "4 actor and 2 × 3 critic layers");
+    for (dims, values) in &drawn {
+        match dims.len() {
+            3 => assert!(orthonormal(dims, values) < 1e-5, "layer {dims:?}"),
+            2 => assert!(values.iter().all(|v| *v == 0.0), "bias {dims:?}"),
+            _ => {}
+        }
+    }
+    let default = layers(&learner(NetworkInit::Burn));
+    assert!(default.iter().any(|(d, v)| d.len() == 2 && v.iter().any(|b| *b != 0.0)));
+    assert!(default
+        .iter()
+        .filter(|(d, _)| d.len() == 3)
+        .any(|(d, v)| orthonormal(d, v) > 0.1));
 }

@@ -152,12 +152,29 @@ fn eval_options_keep_the_runs_other_delay_settings() {
 #[test]
 fn killed_run_resumes_to_the_uninterrupted_run() {
     // augmented-sac: one learner; d2hpg: two learners and the lifting noise in one checkpoint;
-    // d2hpg-principled: two learners, the homomorphism with its Adam and two noise streams.
-    for algo in ["augmented-sac", "d2hpg", "d2hpg-principled"] {
+    // d2hpg under the authors' protocol: λ's schedule over the budget, updates in blocks of 50,
+    // two lifting draws and one α; d2hpg-principled: two learners, the homomorphism with its
+    // Adam and two noise streams.
+    for (algo, protocol) in [
+        ("augmented-sac", "dhrl"),
+        ("d2hpg", "dhrl"),
+        ("d2hpg", "authors"),
+        ("d2hpg-principled", "dhrl"),
+    ] {
         let dir = tempfile::tempdir().unwrap();
         let (whole, killed) = (dir.path().join("whole"), dir.path().join("killed"));
         let with_out = |out: &Path| {
-            let mut args = vec!["train", "--steps", "2000", "--algo", algo, "--delay", "2"];
+            let mut args = vec![
+                "train",
+                "--steps",
+                "2000",
+                "--algo",
+                algo,
+                "--delay",
+                "2",
+                "--protocol",
+                protocol,
+            ];
             args.extend_from_slice(&SMALL);
             args.extend_from_slice(&["--out", out.to_str().unwrap()]);
             args.into_iter().map(String::from).collect::<Vec<_>>()
@@ -220,6 +237,136 @@ fn killed_run_resumes_to_the_uninterrupted_run() {
             }
         }
         assert!(common::column(&whole.join("evals.csv"), "step").len() >= 4);
+    }
+}
+
+/// Under the authors' protocol λ follows its schedule over the run's own budget — 10 until 25%
+/// of the steps, linear to 0 at 75% — which `train.csv`'s `lifting_weight` shows block by block
+/// (50 updates at one step each); updates start at step 100 once the replay holds 256 steps, in
+/// blocks of 50; and a run extended on resume keeps the schedule of its original budget (and
+/// says so), so that λ stays 0 for the added steps.
+#[test]
+fn the_authors_schedule_follows_the_budget_and_survives_an_extension() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("rows.toml");
+    std::fs::write(&config, "log_every = 50\n").unwrap();
+    let run = dir.path().join("run");
+    let out = dhrl(&[
+        "train",
+        "--protocol",
+        "authors",
+        "--algo",
+        "d2hpg",
+        "--task",
+        "inverted-pendulum",
+        "--delay",
+        "2",
+        "--steps",
+        "1000",
+        "--warmup-steps",
+        "400",
+        "--batch-size",
+        "32",
+        "--set",
+        "lifting_samples=4",
+        "--eval-every",
+        "1000",
+        "--eval-episodes",
+        "1",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    ok(out);
+    let saved = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    for line in [
+        "protocol = \"authors\"",
+        "lifting_budget = 1000",
+        "lifting_schedule = \"hold-decay\"",
+        "network_init = \"orthogonal\"",
+        "shared_temperature = true",
+        "lifting_noise = \"independent\"",
+        "lifting_reduction = \"mean\"",
+        "update_every = 50",
+        "learning_starts = 100",
+    ] {
+        assert!(saved.contains(line), "config.toml lacks `{line}`:\n{saved}");
+    }
+    let number = |values: Vec<String>| -> Vec<f64> {
+        values.iter().map(|v| v.parse().unwrap()).collect()
+    };
+    let expected = |step: f64| match step {
+        s if s <= 250.0 => 10.0,
+        s if s >= 750.0 => 0.0,
+        s => 10.0 * (1.0 - (s - 250.0) / 500.0),
+    };
+    let check = |last: f64| {
+        let train = run.join("train.csv");
+        let (steps, updates, weights) = (
+            number(common::column(&train, "step")),
+            number(common::column(&train, "updates")),
+            number(common::column(&train, "lifting_weight")),
+        );
+        let expected_rows = (last - steps[0]) / 50.0 + 1.0;
+        assert_eq!(steps.len() as f64, expected_rows, "a block every 50 steps: {steps:?}");
+        assert_eq!(steps[steps.len() - 1], last, "{steps:?}");
+        for ((step, updates), weight) in steps.iter().zip(&updates).zip(&weights) {
+            assert_eq!(step % 50.0, 0.0, "a block of updates at step {step}");
+            assert!(
+                (weight - expected(*step)).abs() < 1e-4,
+                "λ at step {step} (update {updates}) is {weight}, the schedule's {}",
+                expected(*step)
+            );
+        }
+        steps[0]
+    };
+    // Updates from step 100 once the replay holds 256 steps (each episode's Δ context steps
+    // count too): the first block comes at a multiple of 50 between, the last at 1000.
+    let first = check(1000.0);
+    assert!((150.0..=400.0).contains(&first), "the first block came at step {first}");
+
+    let extended = dhrl(&["train", "--resume", run.to_str().unwrap(), "--steps", "1500"]);
+    let printed = String::from_utf8_lossy(&extended.stderr).to_string();
+    ok(extended);
+    assert!(
+        printed.contains("keeps its original 1000 steps"),
+        "the extension did not say the schedule stays: {printed}"
+    );
+    let saved = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    assert!(saved.contains("steps = 1500") && saved.contains("lifting_budget = 1000"));
+    assert_eq!(check(1500.0), first);
+}
+
+/// `--protocol authors` is refused where it cannot apply, in one line that says why: with more
+/// than one copy, for principled D2HPG (whose authors' form dhrl lacks), and beside a config
+/// file that names the other protocol.
+#[test]
+fn the_authors_protocol_is_refused_where_it_cannot_apply() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("dhrl.toml");
+    std::fs::write(&file, "protocol = \"dhrl\"\n").unwrap();
+    for (extra, says) in [
+        (vec!["--algo", "d2hpg", "--envs", "4"], "1 under the authors' protocol"),
+        (vec!["--algo", "d2hpg-principled"], "cannot apply to d2hpg-principled"),
+        (
+            vec!["--algo", "d2hpg", "--config", file.to_str().unwrap()],
+            "where the file says protocol = \"dhrl\"",
+        ),
+    ] {
+        let mut args = vec!["train", "--protocol", "authors", "--delay", "2"];
+        args.extend(extra);
+        // As a user sees it: without a backtrace under the message.
+        let out = Command::new(env!("CARGO_BIN_EXE_dhrl"))
+            .args(&args)
+            .env_remove("RUST_BACKTRACE")
+            .env_remove("RUST_LIB_BACKTRACE")
+            .output()
+            .unwrap();
+        let printed = String::from_utf8_lossy(&out.stderr).to_string();
+        assert!(!out.status.success(), "{args:?} was accepted");
+        assert!(printed.contains(says), "{args:?}: {printed}");
+        assert_eq!(printed.trim().lines().count(), 1, "{args:?}: {printed}");
     }
 }
 

@@ -8,10 +8,12 @@ use burn::prelude::{Device, Tensor};
 use serde::{Serialize, de::DeserializeOwned};
 
 use super::context::UpdateContext;
+use super::sac::Config as SacConfig;
 use super::stats::Stats;
 use crate::acting::ActingNetwork;
 use crate::delay::{BatchExtras, ReplayError, Transitions};
 use crate::learn::{Devices, LearnError, to_vec, upload_rows};
+use crate::protocol::Protocol;
 use crate::sim::{SimError, TaskModel};
 use crate::tasks::TaskName;
 
@@ -270,6 +272,12 @@ pub enum AlgoError {
         accepted: &'static str,
         value: String,
     },
+    #[error("--protocol {protocol} cannot apply to {algo}: {why}")]
+    ProtocolUnsupported {
+        algo: &'static str,
+        protocol: Protocol,
+        why: &'static str,
+    },
     #[error("--set takes FIELD=VALUE (e.g. --set lifting_weight=10), got `{0}`")]
     BadAssignment(String),
     #[error(
@@ -325,12 +333,47 @@ pub trait AlgoConfig:
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
         self.build_stack(spec, devices, &[seed])
     }
+    /// This algorithm's defaults under `protocol` ([`Protocol`]), or why the protocol cannot
+    /// apply to it. By default, its own defaults with the SAC settings the protocol sets
+    /// ([`SacConfig::protocol_defaults`]) in the fields it shares with SAC.
+    fn for_protocol(protocol: Protocol) -> Result<Self, AlgoError> {
+        let mut table = toml_table(&Self::default());
+        let docs = Self::field_docs();
+        table.extend(
+            toml_table(&SacConfig::protocol_defaults(protocol))
+                .into_iter()
+                .filter(|(field, _)| docs.iter().any(|doc| doc.name == field.as_str())),
+        );
+        Ok(toml::Value::Table(table)
+            .try_into()
+            .expect("SAC's fields read back into the configurations that embed them"))
+    }
+    /// This configuration with what it schedules over the run's step budget (D2HPG's lifting
+    /// weight under the `authors` protocol) fixed to `steps`, where it is not fixed yet: what
+    /// a fresh run records in its `config.toml`, so that a run extended on resume keeps the
+    /// schedule of its original budget. An algorithm that schedules nothing so is itself.
+    fn for_budget(&self, _steps: u64) -> Self {
+        self.clone()
+    }
+    /// The step budget this configuration schedules over, once fixed ([`AlgoConfig::for_budget`]);
+    /// `None` for one that schedules nothing so.
+    fn budget(&self) -> Option<u64> {
+        None
+    }
     /// This configuration with the work it schedules by environment steps (VDPO's cloning
     /// stages) brought within `updates` updates at one update per step, in the same amount per
     /// update, so that timing that many updates counts it (`dhrl bench update`, the cost
     /// estimate of `dhrl sweep plan`). An algorithm that schedules nothing is itself.
     fn schedule_within(&self, _updates: u64) -> Self {
         self.clone()
+    }
+}
+
+/// A configuration's fields as a TOML table.
+pub fn toml_table(config: &impl Serialize) -> toml::Table {
+    match toml::Value::try_from(config) {
+        Ok(toml::Value::Table(table)) => table,
+        other => unreachable!("an algorithm configuration serialises to a table: {other:?}"),
     }
 }
 

@@ -17,6 +17,12 @@
 //! The two learners share no parameters, so steps 1 and 3 run them side by side on rayon's
 //! threads (one after the other on one thread, with the same numbers).
 //!
+//! What the paper leaves open is a field each, with dhrl's choice as its default and the
+//! authors' released code's under `--protocol authors` ([`Config::protocol_defaults`]): λ and its
+//! schedule over the run's steps, K, whether the two policies' samples share their noise,
+//! the loss's reduction over action dimensions, and whether the delay-free learner reads the
+//! regular learner's α instead of its own.
+//!
 //! The regular policy is the one that acts; the delay-free one can be evaluated undelayed.
 use std::ops::Range;
 use std::path::Path;
@@ -27,33 +33,145 @@ use serde::{Deserialize, Serialize};
 use super::agent::{
     ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role, check,
 };
-use super::bpql::{beta_batch, bpql_learner};
+use super::bpql::bpql_learner;
 use super::context::UpdateContext;
 use super::sac::{Config as SacConfig, SacBatch, SacLearner};
 use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
-    CheckpointDir, Devices, LearnError, Noise, lifting_loss, load_json_stack, squashed_samples_k,
+    CheckpointDir, Devices, LearnError, Noise, TransitionTensors, lifting_loss, load_json_stack,
+    squashed_samples_k,
 };
+use crate::protocol::Protocol;
 use crate::seeds;
 
 crate::algo_config! {
     /// D2HPG's configuration: SAC's, for both learners, and the lifting loss.
     pub struct Config {
         ..sac: SacConfig;
-        /// λ, the weight of L_lift in the regular actor's loss (1: ahead of the settings
-        /// compared in docs/experiments.md on HalfCheetah at Δ = 10, two seeds).
+        /// λ, the weight of L_lift in the regular actor's loss, and its largest value under a
+        /// schedule (1: ahead of the settings compared in docs/experiments.md on HalfCheetah at
+        /// Δ = 10, two seeds; the authors' code: 10).
         pub lifting_weight: f64 = 1.0,
-        /// K, samples per state for the means and standard deviations of L_lift (at least 2).
+        /// How λ moves over the run: "constant", or "hold-decay" (λ until `lifting_hold` of the
+        /// budget, then linearly to 0 at `lifting_decay_end`: the authors' code).
+        pub lifting_schedule: LiftingSchedule = LiftingSchedule::Constant,
+        /// Under "hold-decay", the fraction of the budget λ is held for.
+        pub lifting_hold: f64 = 0.25,
+        /// Under "hold-decay", the fraction of the budget at which λ reaches 0.
+        pub lifting_decay_end: f64 = 0.75,
+        /// Environment steps the schedule spans: 0 takes the run's `steps` when it starts and
+        /// records them, so a run extended on resume keeps its original schedule.
+        pub lifting_budget: u64 = 0,
+        /// K, samples per state for the means and standard deviations of L_lift (at least 2;
+        /// the authors' code: 100).
         pub lifting_samples: usize = 2,
+        /// L_lift over action dimensions: "sum" (Eq. 4's squared norms) or "mean" (the authors'
+        /// `F.mse_loss`, 1/dim(A) of the sum).
+        pub lifting_reduction: LiftingReduction = LiftingReduction::Sum,
+        /// The two policies' K samples: "common" (the same ε for both, so that the moments
+        /// agree exactly when the distributions do) or "independent" (the authors' code).
+        pub lifting_noise: LiftingNoise = LiftingNoise::Common,
+        /// One α for both learners (the authors' code): the delay-free learner's entropy terms
+        /// read the regular learner's α, which the regular policy's entropy tunes; false: each
+        /// learner its own.
+        pub shared_temperature: bool = false,
     }
+}
+
+/// How λ moves over a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LiftingSchedule {
+    Constant,
+    HoldDecay,
+}
+
+/// L_lift's reduction over action dimensions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LiftingReduction {
+    Sum,
+    Mean,
+}
+
+/// Whether the two policies' lifting samples share their noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LiftingNoise {
+    Common,
+    Independent,
 }
 
 impl Config {
     fn check(&self, algo: &'static str) -> Result<(), AlgoError> {
         self.sac.check(algo)?;
-        check_lifting(algo, self.lifting_weight, self.lifting_samples)
+        check_lifting(algo, self.lifting_weight, self.lifting_samples)?;
+        check(
+            (0.0..=1.0).contains(&self.lifting_hold)
+                && self.lifting_hold <= self.lifting_decay_end
+                && self.lifting_decay_end <= 1.0,
+            algo,
+            "lifting_hold and lifting_decay_end",
+            "fractions of the budget with 0 ≤ lifting_hold ≤ lifting_decay_end ≤ 1",
+            format!("{} and {}", self.lifting_hold, self.lifting_decay_end),
+        )
+    }
+
+    /// D2HPG's defaults under `protocol`: the authors' code holds λ = 10 to a quarter of the
+    /// run and decays it to 0 at three quarters (`--update-type decay`, their default), with
+    /// K = 100 independent samples, the loss averaged over action dimensions and one α.
+    pub fn protocol_defaults(protocol: Protocol) -> Config {
+        match protocol {
+            Protocol::Dhrl => Config::default(),
+            Protocol::Authors => Config {
+                sac: SacConfig::protocol_defaults(protocol),
+                lifting_weight: 10.0,
+                lifting_schedule: LiftingSchedule::HoldDecay,
+                lifting_samples: 100,
+                lifting_reduction: LiftingReduction::Mean,
+                lifting_noise: LiftingNoise::Independent,
+                shared_temperature: true,
+                ..Config::default()
+            },
+        }
+    }
+
+    /// λ at `env_steps` environment steps: constant, or under "hold-decay" λ while
+    /// `env_steps ≤ ⌊hold·budget⌋`, 0 from `⌊decay_end·budget⌋` on and linear between (the
+    /// authors' `lifting_coef`).
+    pub fn lifting_weight_at(&self, env_steps: u64) -> f64 {
+        if self.lifting_schedule == LiftingSchedule::Constant {
+            return self.lifting_weight;
+        }
+        let budget = self.lifting_budget as f64;
+        let (hold, end) = (
+            (budget * self.lifting_hold).floor(),
+            (budget * self.lifting_decay_end).floor(),
+        );
+        let step = env_steps as f64;
+        if step <= hold {
+            self.lifting_weight
+        } else if step >= end {
+            0.0
+        } else {
+            self.lifting_weight * (1.0 - (step - hold) / (end - hold))
+        }
+    }
+
+    /// [`AlgoConfig::for_budget`]: a "hold-decay" schedule not yet fixed spans `steps`.
+    pub fn with_budget(&self, steps: u64) -> Config {
+        let unfixed = self.lifting_schedule == LiftingSchedule::HoldDecay && self.lifting_budget == 0;
+        Config {
+            lifting_budget: if unfixed { steps } else { self.lifting_budget },
+            ..self.clone()
+        }
+    }
+
+    /// [`AlgoConfig::budget`].
+    pub fn scheduled_budget(&self) -> Option<u64> {
+        (self.lifting_schedule == LiftingSchedule::HoldDecay).then_some(self.lifting_budget)
     }
 }
 
@@ -80,7 +198,7 @@ pub(super) fn check_lifting(
 }
 
 /// What both variants declare, but for their names.
-const D2HPG_INFO: AlgoInfo = AlgoInfo {
+pub(super) const D2HPG_INFO: AlgoInfo = AlgoInfo {
     name: "d2hpg",
     paper_name: "D2HPG",
     role: Role::Proposed,
@@ -100,6 +218,18 @@ impl AlgoConfig for Config {
 
     fn validate(&self) -> Result<(), AlgoError> {
         self.check(Self::INFO.name)
+    }
+
+    fn for_protocol(protocol: Protocol) -> Result<Config, AlgoError> {
+        Ok(Config::protocol_defaults(protocol))
+    }
+
+    fn for_budget(&self, steps: u64) -> Config {
+        self.with_budget(steps)
+    }
+
+    fn budget(&self) -> Option<u64> {
+        self.scheduled_budget()
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -131,6 +261,32 @@ impl AlgoConfig for NaiveConfig {
         self.0.check(Self::INFO.name)
     }
 
+    /// The authors' `d2hpg_naive.py`: λ = 10 without a schedule, K = 100 independent samples
+    /// averaged over action dimensions, and the delay-free SAC's α never tuned (0.2).
+    fn for_protocol(protocol: Protocol) -> Result<NaiveConfig, AlgoError> {
+        let authors = Config::protocol_defaults(protocol);
+        Ok(NaiveConfig(match protocol {
+            Protocol::Dhrl => authors,
+            Protocol::Authors => Config {
+                sac: SacConfig {
+                    autotune_alpha: false,
+                    ..authors.sac
+                },
+                lifting_schedule: LiftingSchedule::Constant,
+                shared_temperature: false,
+                ..authors
+            },
+        }))
+    }
+
+    fn for_budget(&self, steps: u64) -> NaiveConfig {
+        NaiveConfig(self.0.with_budget(steps))
+    }
+
+    fn budget(&self) -> Option<u64> {
+        self.0.scheduled_budget()
+    }
+
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
         Box::new(D2hpg::new(
             Regular::LiftingOnly,
@@ -147,25 +303,34 @@ impl AlgoConfig for NaiveConfig {
 pub enum Regular {
     /// BPQL plus the lifting loss (`d2hpg`, the paper's D2HPG-BPQL).
     Bpql,
+    /// Augmented SAC, actor and critic on `x`, plus the lifting loss (`d2hpg-sac`).
+    AugmentedSac,
     /// The lifting loss alone (`d2hpg-naive`).
     LiftingOnly,
 }
 
-/// `train.csv` columns: the delay-free learner's, the regular BPQL learner's (`d2hpg` only),
-/// and the unweighted lifting loss.
+impl Regular {
+    /// Whether the regular learner has a critic (and its own SAC step).
+    fn has_critic(self) -> bool {
+        self != Regular::LiftingOnly
+    }
+}
+
+/// `train.csv` columns: the delay-free learner's, the regular learner's (not `d2hpg-naive`'s),
+/// the unweighted lifting loss and its weight λ at the update.
 const FREE_STATS: [&str; 3] = ["free_critic_loss", "free_actor_loss", "free_alpha"];
 const REGULAR_STATS: [&str; 3] = ["critic_loss", "actor_loss", "alpha"];
-const LIFTING_STAT: &str = "lifting_loss";
+const LIFTING_STATS: [&str; 2] = ["lifting_loss", "lifting_weight"];
 
 /// D2HPG for a stack of runs (a solo run is S = 1): both learners stacked, a lifting noise
 /// stream per run.
 pub struct D2hpg {
     spec: AgentSpec,
     regular_kind: Regular,
-    /// λ and K.
-    lifting_weight: f64,
-    lifting_samples: usize,
-    /// Actor on `x`, beta critic on `s` (BPQL); only the actor is used by `d2hpg-naive`.
+    /// λ and its schedule, K, the noise, the reduction and the temperature's sharing.
+    config: Config,
+    /// Actor on `x`, critic on `s` (BPQL) or on `x` (augmented SAC); only the actor is used by
+    /// `d2hpg-naive`.
     regular: SacLearner,
     /// SAC on the true state: the abstract policy and critic.
     delay_free: SacLearner,
@@ -185,12 +350,22 @@ impl D2hpg {
             .iter()
             .map(|&s| seeds::delay_free_learner(s))
             .collect();
+        let regular = match regular_kind {
+            Regular::AugmentedSac => SacLearner::stacked(
+                spec.augmented_dim(),
+                spec.augmented_dim(),
+                spec,
+                &config.sac,
+                devices,
+                seeds,
+            ),
+            Regular::Bpql | Regular::LiftingOnly => bpql_learner(spec, &config.sac, devices, seeds),
+        };
         D2hpg {
             spec: spec.clone(),
             regular_kind,
-            lifting_weight: config.lifting_weight,
-            lifting_samples: config.lifting_samples,
-            regular: bpql_learner(spec, &config.sac, devices, seeds),
+            config: config.clone(),
+            regular,
             delay_free: SacLearner::on_state(spec, &config.sac, devices, &free_seeds),
             lifting_noise: seeds
                 .iter()
@@ -238,49 +413,61 @@ impl Agent for D2hpg {
     }
 
     fn stat_names(&self) -> Vec<&'static str> {
-        let regular: &[&'static str] = match self.regular_kind {
-            Regular::Bpql => &REGULAR_STATS,
-            Regular::LiftingOnly => &[],
+        let regular: &[&'static str] = match self.regular_kind.has_critic() {
+            true => &REGULAR_STATS,
+            false => &[],
         };
         FREE_STATS
             .iter()
             .chain(regular)
-            .chain(&[LIFTING_STAT])
+            .chain(&LIFTING_STATS)
             .copied()
             .collect()
     }
 
     fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         let plain = self.regular.devices.plain.clone();
-        let regular_batch = beta_batch(&UpdateContext::batches(contexts)?, &plain);
-        // The delay-free learner: actor and critics on the true state.
-        let free_batch = SacBatch {
-            actor_input: regular_batch.critic_input.clone(),
-            next_actor_input: regular_batch.next_critic_input.clone(),
-            ..regular_batch.clone()
+        // The runs of a stack share one schedule: λ at this update's step.
+        let lifting_weight = self.config.lifting_weight_at(contexts[0].env_steps);
+        let t = TransitionTensors::stacked(&UpdateContext::batches(contexts)?, &plain);
+        let state = (t.state.clone(), t.next_state.clone());
+        let augmented = (t.augmented.clone(), t.next_augmented.clone());
+        // The regular learner: its actor on x, its critic on s (BPQL) or on x (augmented SAC).
+        let regular_batch = match self.regular_kind {
+            Regular::AugmentedSac => SacBatch::new(&t, augmented.clone(), augmented),
+            Regular::Bpql | Regular::LiftingOnly => SacBatch::new(&t, augmented, state.clone()),
         };
+        // The delay-free learner: actor and critics on the true state.
+        let free_batch = SacBatch::new(&t, state.clone(), state);
         let (rows, k, act) = (
             regular_batch.rows(),
-            self.lifting_samples,
+            self.config.lifting_samples,
             self.spec.act_dim,
         );
-        let with_bpql = self.regular_kind == Regular::Bpql;
+        let with_critic = self.regular_kind.has_critic();
         let (regular, delay_free) = (&mut self.regular, &mut self.delay_free);
-        let (alphas, free_alphas) = (
-            regular.temperature.alpha_values(),
-            delay_free.temperature.alpha_values(),
-        );
+        // One α (the authors' code): the delay-free learner reads the regular learner's, as it
+        // stands before this update's temperature step.
+        delay_free.borrowed_alpha = self
+            .config
+            .shared_temperature
+            .then(|| regular.temperature.alpha_tensor());
+        let alphas = regular.temperature.alpha_values();
+        let free_alphas = match self.config.shared_temperature {
+            true => alphas.clone(),
+            false => delay_free.temperature.alpha_values(),
+        };
 
-        // 1. The critics of both learners (the pseudo-code's joint critic step): the beta
-        //    critic on (s, a) for BPQL, the delay-free critic on the time-aligned (s, a, r, s');
-        //    and both policies' distributions, at x and at s, before either policy moves. The
-        //    learners share no parameters and draw from their own noise streams, so rayon runs
-        //    them side by side when it has two threads, with the same numbers as one after
-        //    the other.
+        // 1. The critics of both learners (the pseudo-code's joint critic step): the regular
+        //    critic for BPQL (on s) or augmented SAC (on x), the delay-free critic on the
+        //    time-aligned (s, a, r, s'); and both policies' distributions, at x and at s, before
+        //    either policy moves. The learners share no parameters and draw from their own
+        //    noise streams, so rayon runs them side by side when it has two threads, with the
+        //    same numbers as one after the other.
         let ((critic_losses, regular_distribution), (free_critic_losses, free_distribution)) =
             rayon::join(
                 || {
-                    let losses = with_bpql.then(|| regular.update_critics(&regular_batch));
+                    let losses = with_critic.then(|| regular.update_critics(&regular_batch));
                     (losses, regular.distribution(&regular_batch))
                 },
                 || {
@@ -292,26 +479,39 @@ impl Agent for D2hpg {
 
         // 2. The delay-free policy's squashed actions at s, K per state, from its distribution
         //    before this update, held fixed. The regular policy's K samples reuse the same ε
-        //    (common random numbers): the two sets of moments are then equal exactly when the
-        //    two distributions are. L_lift (Eq. 4) is logged unweighted, per run.
-        let eps = Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, act, &plain);
+        //    under "common" noise (the two sets of moments are then equal exactly when the two
+        //    distributions are) and draw their own under "independent". L_lift (Eq. 4) is
+        //    logged unweighted, per run, in the configured reduction.
+        let free_eps = Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, act, &plain);
+        let regular_eps = match self.config.lifting_noise {
+            LiftingNoise::Common => free_eps.clone(),
+            LiftingNoise::Independent => {
+                Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, act, &plain)
+            }
+        };
         let (free_mean, free_log_std) = free_distribution.clone();
         let free_actions = squashed_samples_k(
             (free_mean.inner(), free_log_std.inner()),
-            eps.clone(),
+            free_eps,
             &delay_free.scale,
         );
-        let regular_actions = squashed_samples_k(regular_distribution.clone(), eps, &regular.scale);
-        let lifting = lifting_loss(regular_actions, free_actions);
+        let regular_actions =
+            squashed_samples_k(regular_distribution.clone(), regular_eps, &regular.scale);
+        let lifting = match self.config.lifting_reduction {
+            LiftingReduction::Sum => lifting_loss(regular_actions, free_actions),
+            LiftingReduction::Mean => {
+                lifting_loss(regular_actions, free_actions).div_scalar(act as f64)
+            }
+        };
         let lifting_values = lifting.clone().inner();
-        let lift = lifting.mul_scalar(self.lifting_weight).sum();
+        let lift = lifting.mul_scalar(lifting_weight).sum();
 
-        // 3. The policies, side by side again: `d2hpg` takes BPQL's actor step with λ·L_lift
-        //    in its loss, `d2hpg-naive` steps on λ·L_lift alone; the delay-free learner takes
-        //    its SAC actor step; then each its temperature and targets.
+        // 3. The policies, side by side again: `d2hpg` and `d2hpg-sac` take their actor step
+        //    with λ·L_lift in its loss, `d2hpg-naive` steps on λ·L_lift alone; the delay-free
+        //    learner takes its SAC actor step; then each its temperature and targets.
         let (actor_losses, (free_actor_losses, _)) = rayon::join(
             || {
-                if with_bpql {
+                if with_critic {
                     let (actor_losses, _) =
                         regular.update_policy(&regular_batch, regular_distribution, Some(lift));
                     Some(actor_losses)
@@ -340,7 +540,12 @@ impl Agent for D2hpg {
                 stats.push(name, values);
             }
         }
-        stats.push(LIFTING_STAT, lifting_values);
+        let runs = lifting_values.dims()[0];
+        stats.push(LIFTING_STATS[0], lifting_values);
+        stats.push(
+            LIFTING_STATS[1],
+            Tensor::full([runs], lifting_weight, &plain),
+        );
         regular.devices.settle();
         Ok(stats)
     }

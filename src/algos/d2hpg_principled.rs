@@ -57,6 +57,7 @@ use serde::{Deserialize, Serialize};
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Role, check};
 use super::context::UpdateContext;
 use super::d2hpg::check_lifting;
+use crate::protocol::Protocol;
 use super::sac::{Config as SacConfig, SacBatch, SacLearner};
 use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
@@ -184,6 +185,19 @@ impl AlgoConfig for Config {
             ("stop", "stop_transition_gradient"),
         ],
     };
+
+    fn for_protocol(protocol: Protocol) -> Result<Config, AlgoError> {
+        match protocol {
+            Protocol::Dhrl => Ok(Config::default()),
+            Protocol::Authors => Err(AlgoError::ProtocolUnsupported {
+                algo: Self::INFO.name,
+                protocol,
+                why: "the authors' principled form (g the identity, L_lax summed with a detached \
+                      target, the mean NLL, gradient clipping, SAC on x as the regular learner) \
+                      is not built yet; its nearest settings are in docs/DESIGN.md §3.4",
+            }),
+        }
+    }
 
     fn validate(&self) -> Result<(), AlgoError> {
         let algo = Self::INFO.name;

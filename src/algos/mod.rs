@@ -12,6 +12,7 @@ mod bpql;
 mod context;
 mod d2hpg;
 mod d2hpg_principled;
+mod d2hpg_sac;
 mod delayed_sac;
 mod independent;
 mod naive_sac;
@@ -23,11 +24,13 @@ mod vdpo;
 
 pub use agent::{
     ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role,
-    check, random_batch, toml_value,
+    check, random_batch, toml_table, toml_value,
 };
 pub use bpql::Bpql;
 pub use context::UpdateContext;
-pub use d2hpg::{Config as D2hpgConfig, D2hpg, Regular};
+pub use d2hpg::{
+    Config as D2hpgConfig, D2hpg, LiftingNoise, LiftingReduction, LiftingSchedule, Regular,
+};
 pub use d2hpg_principled::{
     AbstractReward, Config as D2hpgPrincipledConfig, D2hpgPrincipled, Distance, Homomorphism,
     LaxMetric, MetricReduction, RegularCritic, TransitionLoss, abstract_model_loss, gaussian_w2,

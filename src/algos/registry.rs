@@ -2,9 +2,14 @@
 //! `--algo` accepts, the messages that name them) generated from it.
 use std::marker::PhantomData;
 
-use super::agent::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, FieldDoc, Role};
-use super::{augmented_sac, bpql, d2hpg, d2hpg_principled, delayed_sac, naive_sac, sac, vdpo};
+use super::agent::{
+    Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, FieldDoc, Role, toml_table,
+};
+use super::{
+    augmented_sac, bpql, d2hpg, d2hpg_principled, d2hpg_sac, delayed_sac, naive_sac, sac, vdpo,
+};
 use crate::learn::Devices;
+use crate::protocol::{Protocol, merge_tables};
 
 /// Every algorithm, one line each: the registry.
 pub static ALGORITHMS: &[&dyn Algorithm] = &[
@@ -16,6 +21,7 @@ pub static ALGORITHMS: &[&dyn Algorithm] = &[
     &Registered::<bpql::Config>::new(),
     &Registered::<d2hpg::NaiveConfig>::new(),
     &Registered::<d2hpg::Config>::new(),
+    &Registered::<d2hpg_sac::Config>::new(),
     &Registered::<d2hpg_principled::Config>::new(),
 ];
 
@@ -86,9 +92,13 @@ pub fn paper_name(name: &str) -> &str {
 pub trait Algorithm: Sync {
     fn info(&self) -> &'static AlgoInfo;
     fn field_docs(&self) -> Vec<FieldDoc>;
-    /// The typed configuration: defaults overridden by the fields of `given`, checked. The
-    /// one place where an algorithm's TOML is read.
-    fn parse(&self, given: &toml::Table) -> Result<Box<dyn AnyConfig>, AlgoError>;
+    /// The typed configuration: the defaults of `protocol` overridden by the fields of
+    /// `given`, checked. The one place where an algorithm's TOML is read.
+    fn parse(
+        &self,
+        protocol: Protocol,
+        given: &toml::Table,
+    ) -> Result<Box<dyn AnyConfig>, AlgoError>;
 }
 
 /// An algorithm's configuration, typed, whatever the algorithm: what `AlgoSettings` holds and
@@ -104,6 +114,10 @@ pub trait AnyConfig: Send + Sync {
     fn boxed_clone(&self) -> Box<dyn AnyConfig>;
     /// [`AlgoConfig::schedule_within`].
     fn schedule_within(&self, updates: u64) -> Box<dyn AnyConfig>;
+    /// [`AlgoConfig::for_budget`].
+    fn for_budget(&self, steps: u64) -> Box<dyn AnyConfig>;
+    /// [`AlgoConfig::budget`].
+    fn budget(&self) -> Option<u64>;
 }
 
 impl<C: AlgoConfig> AnyConfig for C {
@@ -112,10 +126,15 @@ impl<C: AlgoConfig> AnyConfig for C {
     }
 
     fn table(&self) -> toml::Table {
-        match toml::Value::try_from(self) {
-            Ok(toml::Value::Table(table)) => table,
-            other => unreachable!("an algorithm configuration serialises to a table: {other:?}"),
-        }
+        toml_table(self)
+    }
+
+    fn for_budget(&self, steps: u64) -> Box<dyn AnyConfig> {
+        Box::new(AlgoConfig::for_budget(self, steps))
+    }
+
+    fn budget(&self) -> Option<u64> {
+        AlgoConfig::budget(self)
     }
 
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
@@ -153,7 +172,11 @@ impl<C: AlgoConfig> Algorithm for Registered<C> {
         C::field_docs()
     }
 
-    fn parse(&self, given: &toml::Table) -> Result<Box<dyn AnyConfig>, AlgoError> {
+    fn parse(
+        &self,
+        protocol: Protocol,
+        given: &toml::Table,
+    ) -> Result<Box<dyn AnyConfig>, AlgoError> {
         let docs = C::field_docs();
         if let Some(field) = given.keys().find(|k| !docs.iter().any(|d| d.name == *k)) {
             return Err(AlgoError::UnknownField {
@@ -162,7 +185,9 @@ impl<C: AlgoConfig> Algorithm for Registered<C> {
                 valid: docs.iter().map(|d| d.name).collect::<Vec<_>>().join(", "),
             });
         }
-        let config: C = toml::Value::Table(given.clone()).try_into().map_err(|e| {
+        let mut fields = toml_table(&C::for_protocol(protocol)?);
+        merge_tables(&mut fields, given.clone());
+        let config: C = toml::Value::Table(fields).try_into().map_err(|e| {
             // Name the field: the first that fails on its own.
             let field = given.iter().find(|(k, v)| {
                 let alone = toml::Table::from_iter([((*k).clone(), (*v).clone())]);

@@ -18,11 +18,12 @@ use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::{ReplayError, Transitions};
 use crate::learn::{
-    ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, Noise, Temperature,
-    TransitionTensors, TwinQ, actor_loss, adam, batch_mean, critic_loss, critic_target,
-    load_json_stack, load_optimizer_stack, load_stack, polyak, select_runs, squashed_sample, stack,
-    temperature_loss, to_vec, upload_rows,
+    ActionScale, CheckpointDir, Devices, GaussianPolicy, LearnError, NetworkInit, Noise,
+    Temperature, TransitionTensors, TwinQ, actor_loss, adam, batch_mean, critic_loss,
+    critic_target, initialise, load_json_stack, load_optimizer_stack, load_stack, polyak,
+    select_runs, squashed_sample, stack, temperature_loss, to_vec, upload_rows,
 };
+use crate::protocol::Protocol;
 
 crate::algo_config! {
     /// SAC's hyperparameters (docs/DESIGN.md §3.3): the configuration of `sac`, and the shared part of
@@ -40,6 +41,25 @@ crate::algo_config! {
         pub initial_alpha: f64 = 0.2,
         /// Learn α toward the target entropy −dim(A); false keeps it fixed.
         pub autotune_alpha: bool = true,
+        /// How the actor's and critics' linear layers are drawn: "burn" (Kaiming-uniform by
+        /// fan-in, about PyTorch's default) or "orthogonal" (gain 1, zero biases: the authors'
+        /// code, and the `authors` protocol's).
+        pub network_init: NetworkInit = NetworkInit::Burn,
+    }
+}
+
+impl Config {
+    /// SAC's settings under `protocol`, which every algorithm built on [`SacLearner`] shares:
+    /// the authors' code draws its networks orthogonally; its other SAC hyperparameters are
+    /// dhrl's defaults already (docs/DESIGN.md §3.3).
+    pub fn protocol_defaults(protocol: Protocol) -> Config {
+        match protocol {
+            Protocol::Dhrl => Config::default(),
+            Protocol::Authors => Config {
+                network_init: NetworkInit::Orthogonal,
+                ..Config::default()
+            },
+        }
     }
 }
 
@@ -173,6 +193,10 @@ pub struct SacLearner {
     /// Polyak-averaged copy of `critic` on the plain device: never on an autodiff graph.
     pub target: TwinQ,
     pub temperature: Temperature,
+    /// Another learner's α `[S, 1, 1]` for the update under way, when this learner shares it
+    /// (D2HPG's one temperature under the `authors` protocol, set before each update): the
+    /// entropy terms read it and this learner's own temperature is left as it is.
+    pub borrowed_alpha: Option<Tensor<3>>,
     actor_opt: ModuleOptimizer,
     critic_opt: ModuleOptimizer,
     temperature_opt: ModuleOptimizer,
@@ -217,7 +241,11 @@ impl SacLearner {
                 devices.train.seed(seed);
                 let actor = GaussianPolicy::new(actor_dim, spec.act_dim, &devices.train);
                 let critic = TwinQ::new(critic_dim, spec.act_dim, &devices.train);
-                (actor, critic)
+                let init = hyper.network_init;
+                (
+                    initialise(actor, init, crate::seeds::named(seed, "init/actor")),
+                    initialise(critic, init, crate::seeds::named(seed, "init/critic")),
+                )
             })
             .unzip();
         let critic = stack(critics);
@@ -231,6 +259,7 @@ impl SacLearner {
                     .map(|_| Temperature::new(hyper.initial_alpha, &devices.train))
                     .collect(),
             ),
+            borrowed_alpha: None,
             actor_opt: adam(hyper.adam_epsilon),
             critic_opt: adam(hyper.adam_epsilon),
             temperature_opt: adam(hyper.adam_epsilon),
@@ -260,6 +289,14 @@ impl SacLearner {
         seeds: &[u64],
     ) -> SacLearner {
         SacLearner::stacked(spec.obs_dim, spec.obs_dim, spec, hyper, devices, seeds)
+    }
+
+    /// Each run's α `[S, 1, 1]` for this update: its own, or the one it borrows.
+    pub fn alpha(&self) -> Tensor<3> {
+        match &self.borrowed_alpha {
+            Some(alpha) => alpha.clone(),
+            None => self.temperature.alpha_tensor(),
+        }
     }
 
     /// How many runs the stack holds.
@@ -331,7 +368,7 @@ impl SacLearner {
     /// Returns each run's loss `[S]`. Leaves the actor as it is, so that
     /// [`SacLearner::distribution`] may run before or after it.
     pub fn update_critics(&mut self, batch: &SacBatch) -> Tensor<1> {
-        let alpha = self.temperature.alpha_tensor();
+        let alpha = self.alpha();
         let next_eps = self.normal(batch.rows());
         let next = self
             .actor
@@ -395,7 +432,7 @@ impl SacLearner {
         distribution: (Tensor<3>, Tensor<3>),
         extra: Option<Tensor<1>>,
     ) -> (Tensor<1>, Tensor<1>) {
-        let alpha = self.temperature.alpha_tensor();
+        let alpha = self.alpha();
         let eps = self.normal(batch.rows());
         let pi = squashed_sample(distribution, eps, &self.scale);
         let mean_log_prob = batch_mean(pi.log_prob.clone().inner());
@@ -425,7 +462,7 @@ impl SacLearner {
     /// Temperature (Eq. 18): `−α(log π + H̄)`, toward the target entropy, from each run's
     /// mean `log π` `[S]`; returns each run's loss (0 when α is fixed).
     fn update_temperature(&mut self, mean_log_prob: Tensor<1>) -> Tensor<1> {
-        if !self.hyper.autotune_alpha {
+        if !self.hyper.autotune_alpha || self.borrowed_alpha.is_some() {
             return Tensor::zeros([self.runs()], &self.devices.plain);
         }
         let losses = temperature_loss(

@@ -5,10 +5,13 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use super::agent::{Agent, AgentSpec, AlgoError, AlgoInfo, FieldDoc};
 use super::registry::{AnyConfig, algorithm};
 use crate::learn::Devices;
+use crate::protocol::Protocol;
 
-/// An algorithm and its whole configuration, typed (defaults filled in, every field checked).
+/// An algorithm and its whole configuration, typed (defaults filled in, every field checked),
+/// with the protocol whose defaults filled it in.
 pub struct AlgoSettings {
     config: Box<dyn AnyConfig>,
+    protocol: Protocol,
 }
 
 impl AlgoSettings {
@@ -17,11 +20,27 @@ impl AlgoSettings {
         AlgoSettings::with_fields(name, &toml::Table::new())
     }
 
-    /// `name` with the given fields over its defaults: the one place a configuration is read.
+    /// `name` with the given fields over its defaults (dhrl's protocol).
     pub fn with_fields(name: &str, given: &toml::Table) -> Result<AlgoSettings, AlgoError> {
+        AlgoSettings::under(Protocol::Dhrl, name, given)
+    }
+
+    /// `name` with the given fields over its defaults under `protocol`: the one place a
+    /// configuration is read.
+    pub fn under(
+        protocol: Protocol,
+        name: &str,
+        given: &toml::Table,
+    ) -> Result<AlgoSettings, AlgoError> {
         Ok(AlgoSettings {
-            config: algorithm(name)?.parse(given)?,
+            config: algorithm(name)?.parse(protocol, given)?,
+            protocol,
         })
+    }
+
+    /// The protocol whose defaults these settings started from.
+    pub fn protocol(&self) -> Protocol {
+        self.protocol
     }
 
     pub fn name(&self) -> &'static str {
@@ -59,7 +78,26 @@ impl AlgoSettings {
             .filter(|(k, _)| docs.iter().any(|d| d.name == k.as_str()))
             .collect();
         given.extend(values.iter().map(|(k, v)| (k.clone(), v.clone())));
-        AlgoSettings::with_fields(target.info().name, &given)
+        AlgoSettings::under(self.protocol, target.info().name, &given)
+    }
+
+    /// These settings, their fields all given, as read under `protocol` (a `config.toml`'s
+    /// `[algo]`, complete, beside its `protocol`).
+    pub fn tagged(self, protocol: Protocol) -> AlgoSettings {
+        AlgoSettings { protocol, ..self }
+    }
+
+    /// [`crate::algos::AlgoConfig::budget`].
+    pub fn budget(&self) -> Option<u64> {
+        self.config.budget()
+    }
+
+    /// [`crate::algos::AlgoConfig::for_budget`].
+    pub fn for_budget(&self, steps: u64) -> AlgoSettings {
+        AlgoSettings {
+            config: self.config.for_budget(steps),
+            protocol: self.protocol,
+        }
     }
 
     /// Overrides one field from `FIELD=VALUE` (VALUE in TOML syntax; a bare word is a string).
@@ -74,6 +112,7 @@ impl AlgoSettings {
     pub fn schedule_within(&self, updates: u64) -> AlgoSettings {
         AlgoSettings {
             config: self.config.schedule_within(updates),
+            protocol: self.protocol,
         }
     }
 
@@ -155,12 +194,14 @@ impl Clone for AlgoSettings {
     fn clone(&self) -> AlgoSettings {
         AlgoSettings {
             config: self.config.boxed_clone(),
+            protocol: self.protocol,
         }
     }
 }
 
 impl PartialEq for AlgoSettings {
     fn eq(&self, other: &AlgoSettings) -> bool {
+        // The fields decide; the protocol only chose the defaults they started from.
         self.name() == other.name() && self.fields() == other.fields()
     }
 }
@@ -169,6 +210,7 @@ impl std::fmt::Debug for AlgoSettings {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("AlgoSettings")
             .field("name", &self.name())
+            .field("protocol", &self.protocol)
             .field("fields", &self.fields())
             .finish()
     }

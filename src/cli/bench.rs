@@ -5,6 +5,7 @@ use clap::{Args, Subcommand};
 use dhrl::algos::{AlgoSettings, names, parse_assignment, reference};
 use dhrl::bench::{bench_delay, bench_env, bench_update};
 use dhrl::learn::LearnDevice;
+use dhrl::protocol::Protocol;
 use dhrl::tasks::TaskName;
 
 #[derive(Subcommand)]
@@ -46,6 +47,9 @@ pub struct BenchUpdateArgs {
     /// D2HPG's lifting samples K per state (--set lifting_samples=…).
     #[arg(long)]
     lifting_samples: Option<usize>,
+    /// Whose defaults the algorithm's fields start from (`dhrl train --protocol`).
+    #[arg(long, value_enum, default_value_t = Protocol::Dhrl)]
+    protocol: Protocol,
     #[arg(long)]
     json: bool,
 }
@@ -119,7 +123,7 @@ fn run_bench_update(args: &BenchUpdateArgs) -> anyhow::Result<()> {
         let (field, value) = parse_assignment(assignment)?;
         values.insert(field, value);
     }
-    let algo = AlgoSettings::with_fields(&args.algo, &values)?;
+    let algo = AlgoSettings::under(args.protocol, &args.algo, &values)?;
     let report = bench_update(
         &algo,
         args.task,

@@ -15,6 +15,7 @@ use dhrl::sweep::{
     SlurmOptions, Sweep, estimate_cost, run_group, run_local, shell_quote, stack_groups,
     steps_done, write_array_scripts, write_atomically,
 };
+use dhrl::protocol::Protocol;
 use dhrl::tasks::TaskName;
 
 #[derive(Subcommand)]
@@ -53,6 +54,10 @@ pub struct PlanArgs {
     /// learning curves of a shortened sweep.
     #[arg(long, value_name = "STEPS")]
     eval_every: Option<u64>,
+    /// Run the experiment under this protocol instead of its own (the presets: authors; dhrl
+    /// for dhrl's own settings: `dhrl train --protocol`).
+    #[arg(long, value_enum)]
+    protocol: Option<Protocol>,
     /// These tasks instead of the experiment's (comma-separated).
     #[arg(long, value_enum, value_delimiter = ',')]
     tasks: Vec<TaskName>,
@@ -180,6 +185,11 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     experiment.scale(args.scale)?;
     if let Some(steps) = args.steps {
         experiment.steps = steps;
+    }
+    if let Some(protocol) = args.protocol {
+        experiment
+            .train
+            .insert("protocol".into(), toml::Value::String(protocol.name().into()));
     }
     if let Some(every) = args.eval_every {
         experiment.train.insert(

@@ -5,6 +5,7 @@
 
 mod cpu_ops;
 mod device;
+mod init;
 mod io;
 mod losses;
 mod nets;
@@ -16,6 +17,7 @@ pub use cpu_ops::{adam, gelu, times_mask};
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;
 pub use device::{Devices, LearnDevice, SOFTWARE_WGPU};
+pub use init::{NetworkInit, initialise};
 pub use io::{CheckpointDir, load_json_stack, load_optimizer_stack, load_stack};
 pub use losses::{
     actor_loss, batch_mean, critic_loss, critic_target, lifting_loss, polyak,

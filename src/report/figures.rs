@@ -6,9 +6,10 @@ use std::path::{Path, PathBuf};
 
 use super::ReportError;
 use super::normalised;
-use super::results::{Condition, RunResult};
+use super::results::{Condition, RunResult, Variant, entries};
 use super::stats::mean_std;
-use crate::algos::{Role, names, names_where, paper_name};
+use crate::algos::{Role, names_where, paper_name};
+use crate::protocol::Protocol;
 use crate::charts::{CategorySeries, Labels, Line, category_chart, line_chart, svg_to_png};
 use crate::tasks::TaskName;
 use crate::train::{curve_summary, plot_curves};
@@ -30,6 +31,15 @@ fn figure(
     draw(&svg)?;
     let png = svg_to_png(&svg).map_err(chart_error(&svg))?;
     Ok(vec![svg, png])
+}
+
+/// How a figure names an algorithm in a variant: its paper name, and the variant where it is
+/// not dhrl's own protocol and code.
+fn entry_label(algorithm: &str, variant: &Variant) -> String {
+    match (variant.protocol, &variant.implementation) {
+        (Protocol::Dhrl, None) => paper_name(algorithm).to_string(),
+        _ => format!("{} [{}]", paper_name(algorithm), variant.label()),
+    }
 }
 
 /// Every figure the runs allow.
@@ -54,14 +64,14 @@ fn learning_curves(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, Repor
     cells.dedup();
     let mut files = Vec::new();
     for (task, condition) in cells {
-        let curves: Vec<_> = names()
+        let curves: Vec<_> = entries(runs)
             .into_iter()
-            .filter_map(|algorithm| {
+            .filter_map(|(algorithm, variant)| {
                 let members: Vec<_> = runs
                     .iter()
                     .filter(|r| {
                         r.task == task
-                            && r.algorithm == algorithm
+                            && r.is(algorithm, &variant)
                             && (r.condition == condition
                                 || (condition.is_table1()
                                     && r.condition.is_table1()
@@ -70,7 +80,7 @@ fn learning_curves(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, Repor
                     .map(|r| (r.seed, r.evals.clone()))
                     .collect();
                 (!members.is_empty())
-                    .then(|| curve_summary(paper_name(algorithm).to_string(), &members))
+                    .then(|| curve_summary(entry_label(algorithm, &variant), &members))
             })
             .collect();
         let title = format!("{} at {}", task.gymnasium_id(), condition.label());
@@ -96,22 +106,22 @@ fn normalised_mean(runs: &[&RunResult]) -> Option<(f64, f64)> {
 /// its σ = 0 runs are the first point.
 fn noise(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
     let fixed: Vec<&RunResult> = runs.iter().filter(|r| !r.condition.random_delay).collect();
-    let noisy: BTreeSet<(TaskName, &str, usize)> = fixed
+    let noisy: BTreeSet<(TaskName, &str, &Variant, usize)> = fixed
         .iter()
         .filter(|r| r.condition.actuator_noise > 0.0)
-        .map(|r| (r.task, r.algorithm, r.condition.delay))
+        .map(|r| (r.task, r.algorithm, &r.variant, r.condition.delay))
         .collect();
     if noisy.is_empty() {
         return Ok(Vec::new());
     }
     let lines: Vec<Line> = noisy
         .iter()
-        .map(|&(task, algorithm, delay)| {
+        .map(|&(task, algorithm, variant, delay)| {
             let same: Vec<&RunResult> = fixed
                 .iter()
                 .copied()
                 .filter(|r| {
-                    r.task == task && r.algorithm == algorithm && r.condition.delay == delay
+                    r.task == task && r.is(algorithm, variant) && r.condition.delay == delay
                 })
                 .collect();
             let sigmas: BTreeSet<u64> = same
@@ -131,7 +141,7 @@ fn noise(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
                 .collect();
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
             Line {
-                label: format!("{task} {} Δ={delay}", paper_name(algorithm)),
+                label: format!("{task} {} Δ={delay}", entry_label(algorithm, variant)),
                 points,
             }
         })
@@ -149,10 +159,10 @@ fn noise(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
 /// Random delays (uniform in 1..=Δ) against fixed Δ, per task, for each algorithm that has
 /// random-delay runs.
 fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
-    let random: BTreeSet<(&str, usize)> = runs
+    let random: BTreeSet<(&str, &Variant, usize)> = runs
         .iter()
         .filter(|r| r.condition.random_delay && r.condition.actuator_noise == 0.0)
-        .map(|r| (r.algorithm, r.condition.delay))
+        .map(|r| (r.algorithm, &r.variant, r.condition.delay))
         .collect();
     if random.is_empty() {
         return Ok(Vec::new());
@@ -165,7 +175,7 @@ fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportEr
         })
         .collect();
     let mut series = Vec::new();
-    for &(algorithm, delay) in &random {
+    for &(algorithm, variant, delay) in &random {
         for kind in [false, true] {
             let values = tasks
                 .iter()
@@ -174,7 +184,7 @@ fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportEr
                         .iter()
                         .filter(|r| {
                             r.task == task
-                                && r.algorithm == algorithm
+                                && r.is(algorithm, variant)
                                 && r.condition.delay == delay
                                 && r.condition.random_delay == kind
                                 && r.condition.actuator_noise == 0.0
@@ -186,7 +196,7 @@ fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportEr
             series.push(CategorySeries {
                 label: format!(
                     "{} {}",
-                    paper_name(algorithm),
+                    entry_label(algorithm, variant),
                     if kind {
                         format!("random Δ in 1..={delay}")
                     } else {
@@ -212,7 +222,8 @@ fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportEr
 /// D2HPG) per task and Δ, where the ablation-only one ran.
 fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
     let table: Vec<&RunResult> = runs.iter().filter(|r| r.condition.is_table1()).collect();
-    let ablation_only = names_where(|info| info.role == Role::Ablation);
+    let ablation_only =
+        names_where(|info| info.role == Role::Ablation && info.in_lifting_ablation);
     let cells: Vec<(TaskName, usize)> = table
         .iter()
         .filter(|r| ablation_only.contains(&r.algorithm))
@@ -223,10 +234,12 @@ fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError>
     if cells.is_empty() {
         return Ok(Vec::new());
     }
-    let series: Vec<CategorySeries> = names_where(|info| info.in_lifting_ablation)
+    let in_ablation = names_where(|info| info.in_lifting_ablation);
+    let series: Vec<CategorySeries> = entries(table.iter().copied())
         .into_iter()
-        .map(|algorithm| CategorySeries {
-            label: paper_name(algorithm).to_string(),
+        .filter(|(algorithm, _)| in_ablation.contains(algorithm))
+        .map(|(algorithm, variant)| CategorySeries {
+            label: entry_label(algorithm, &variant),
             values: cells
                 .iter()
                 .map(|&(task, delay)| {
@@ -234,7 +247,7 @@ fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError>
                         .iter()
                         .copied()
                         .filter(|r| {
-                            r.task == task && r.algorithm == algorithm && r.condition.delay == delay
+                            r.task == task && r.is(algorithm, &variant) && r.condition.delay == delay
                         })
                         .collect();
                     normalised_mean(&at)
@@ -255,10 +268,7 @@ fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError>
 
 /// Hours of wall-clock per 1M environment steps, per algorithm, a series per task and Δ.
 fn runtime(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
-    let algorithms: Vec<&str> = names()
-        .into_iter()
-        .filter(|a| runs.iter().any(|r| r.algorithm == *a))
-        .collect();
+    let algorithms = entries(runs);
     let cells: BTreeSet<(TaskName, usize)> =
         runs.iter().map(|r| (r.task, r.condition.delay)).collect();
     let series: Vec<CategorySeries> = cells
@@ -267,11 +277,11 @@ fn runtime(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> 
             label: format!("{task} Δ={delay}"),
             values: algorithms
                 .iter()
-                .map(|&algorithm| {
+                .map(|(algorithm, variant)| {
                     let hours: Vec<f64> = runs
                         .iter()
                         .filter(|r| {
-                            r.task == task && r.condition.delay == delay && r.algorithm == algorithm
+                            r.task == task && r.condition.delay == delay && r.is(algorithm, variant)
                         })
                         .filter_map(|r| r.seconds_per_million().map(|s| s / 3600.0))
                         .collect();
@@ -282,7 +292,7 @@ fn runtime(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> 
         .collect();
     let categories: Vec<String> = algorithms
         .iter()
-        .map(|a| paper_name(a).to_string())
+        .map(|(a, v)| entry_label(a, v))
         .collect();
     let labels = Labels {
         title: "Wall-clock per 1M environment steps (this machine)",

@@ -8,7 +8,10 @@
 //! condition (Δ, and actuator noise or random delays), is the IQM of those scores over every
 //! run of every task with a 95% stratified-bootstrap interval, and the probability that D2HPG's
 //! final return beats each other algorithm's (per task, over run pairs, then averaged over
-//! tasks), with its interval.
+//! tasks), with its interval. Runs are kept apart by their protocol (`config.toml`) and, for
+//! runs converted from another implementation's logs, by that implementation
+//! ([`IMPLEMENTATION_FILE`]); dhrl's runs of an algorithm are then compared with the other
+//! implementation's the same way.
 use std::path::{Path, PathBuf};
 
 mod figures;
@@ -16,11 +19,11 @@ mod results;
 mod stats;
 mod table;
 
-pub use results::{Condition, RunResult, load_runs};
+pub use results::{Condition, IMPLEMENTATION_FILE, RunResult, Variant, entries, load_runs};
 pub use stats::{iqm, mean_std, probability_of_improvement};
 pub use table::{PaperCell, Table, paper_table1, table1};
 
-use crate::algos::{names, paper_name, proposed, reference};
+use crate::algos::{paper_name, proposed, reference};
 use crate::sweep::write_atomically;
 use crate::tasks::TaskName;
 use stats::{Strata, bootstrap_interval, iqm_of_strata};
@@ -57,28 +60,32 @@ pub fn normalised(task: TaskName, final_return: f64) -> f64 {
 pub struct IqmRow {
     pub condition: Condition,
     pub algorithm: &'static str,
+    pub variant: Variant,
     pub tasks: Vec<TaskName>,
     pub runs: usize,
     pub iqm: f64,
     pub interval: (f64, f64),
 }
 
-/// The probability that the paper's method's final return beats a baseline's under a
-/// condition.
+/// The probability that one entry's final return beats another's under a condition: the
+/// paper's method over each baseline of its variant, and dhrl's runs of an algorithm over
+/// another implementation's runs of it under the same protocol.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImprovementRow {
     pub condition: Condition,
-    /// The paper's method (`algos::proposed`).
+    /// The paper's method (`algos::proposed`), or the algorithm another implementation also ran.
     pub algorithm: &'static str,
+    pub variant: Variant,
     pub baseline: &'static str,
+    pub baseline_variant: Variant,
     pub probability: f64,
     pub interval: (f64, f64),
 }
 
-/// Normalised final returns of `algorithm` under `condition`, one list per task.
+/// Normalised final returns of `algorithm` in `variant` under `condition`, one list per task.
 fn strata(
     runs: &[RunResult],
-    algorithm: &str,
+    (algorithm, variant): &(&'static str, Variant),
     condition: &Condition,
     tasks: &[TaskName],
 ) -> Strata {
@@ -86,7 +93,9 @@ fn strata(
         .iter()
         .map(|&task| {
             runs.iter()
-                .filter(|r| r.condition == *condition && r.algorithm == algorithm && r.task == task)
+                .filter(|r| {
+                    r.condition == *condition && r.is(algorithm, variant) && r.task == task
+                })
                 .map(|r| normalised(task, r.final_eval().1))
                 .collect()
         })
@@ -107,31 +116,29 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
     let (mut iqms, mut improvements) = (Vec::new(), Vec::new());
     for condition in &conditions {
         let under = |r: &&RunResult| r.condition == *condition;
-        let algorithms: Vec<&'static str> = names()
-            .into_iter()
-            .filter(|a| runs.iter().filter(under).any(|r| r.algorithm == *a))
-            .collect();
+        let entries = entries(runs.iter().filter(under));
         let tasks: Vec<TaskName> = TaskName::ALL
             .into_iter()
             .filter(|&t| {
-                algorithms.iter().all(|a| {
+                entries.iter().all(|(a, v)| {
                     runs.iter()
                         .filter(under)
-                        .any(|r| r.algorithm == *a && r.task == t)
+                        .any(|r| r.is(a, v) && r.task == t)
                 })
             })
             .collect();
         if tasks.is_empty() {
             continue;
         }
-        // Resampling streams: one per condition and algorithm (pair), from the condition itself
+        // Resampling streams: one per condition and entry (pair), from the condition itself
         // so that other runs in the report do not move its intervals.
         let stream = resampling_stream(condition);
-        for (k, &algorithm) in algorithms.iter().enumerate() {
-            let scores = strata(runs, algorithm, condition, &tasks);
+        for (k, entry) in entries.iter().enumerate() {
+            let scores = strata(runs, entry, condition, &tasks);
             iqms.push(IqmRow {
                 condition: *condition,
-                algorithm,
+                algorithm: entry.0,
+                variant: entry.1.clone(),
                 tasks: tasks.clone(),
                 runs: scores.iter().map(Vec::len).sum(),
                 iqm: iqm_of_strata(&scores),
@@ -143,23 +150,38 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
                 ),
             });
         }
+        // The pairs compared: the paper's method over each baseline of its variant, then
+        // dhrl's runs of an algorithm over another implementation's of the same protocol.
         let proposed = proposed().name;
-        if !algorithms.contains(&proposed) {
-            continue;
-        }
-        let ours = strata(runs, proposed, condition, &tasks);
-        for (k, &baseline) in algorithms.iter().enumerate() {
-            if baseline == proposed {
-                continue;
+        let mut pairs = Vec::new();
+        for ours in entries.iter().filter(|(a, _)| *a == proposed) {
+            for theirs in entries.iter().filter(|(a, v)| *a != proposed && *v == ours.1) {
+                pairs.push((ours, theirs));
             }
-            let theirs = strata(runs, baseline, condition, &tasks);
+        }
+        for theirs in entries.iter().filter(|(_, v)| v.implementation.is_some()) {
+            let dhrl = Variant {
+                implementation: None,
+                ..theirs.1.clone()
+            };
+            if let Some(ours) = entries.iter().find(|(a, v)| *a == theirs.0 && *v == dhrl) {
+                pairs.push((ours, theirs));
+            }
+        }
+        for (k, (ours, theirs)) in pairs.into_iter().enumerate() {
+            let (x, y) = (
+                strata(runs, ours, condition, &tasks),
+                strata(runs, theirs, condition, &tasks),
+            );
             improvements.push(ImprovementRow {
                 condition: *condition,
-                algorithm: proposed,
-                baseline,
-                probability: probability_of_improvement(&ours, &theirs),
+                algorithm: ours.0,
+                variant: ours.1.clone(),
+                baseline: theirs.0,
+                baseline_variant: theirs.1.clone(),
+                probability: probability_of_improvement(&x, &y),
                 interval: bootstrap_interval(
-                    &[&ours, &theirs],
+                    &[&x, &y],
                     reps,
                     stream.wrapping_mul(1000).wrapping_add(k as u64),
                     |g| probability_of_improvement(&g[0], &g[1]),
@@ -185,15 +207,16 @@ fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: us
     let mut out = format!(
         "Normalised score: final return / the return of Table 1's {} on the task. IQM over \
          every run of the tasks listed; 95% stratified-bootstrap intervals ({reps} resamples).\n\n\
-         | condition | algorithm | tasks | runs | IQM | 95% interval |\n|---|---|---|---:|---:|---|\n",
+         | condition | algorithm | protocol | tasks | runs | IQM | 95% interval |\n|---|---|---|---|---:|---:|---|\n",
         reference().paper_name
     );
     for row in iqms {
         let tasks: Vec<String> = row.tasks.iter().map(|t| t.to_string()).collect();
         out += &format!(
-            "| {} | {} | {} | {} | {:.3} | [{:.3}, {:.3}] |\n",
+            "| {} | {} | {} | {} | {} | {:.3} | [{:.3}, {:.3}] |\n",
             row.condition.label(),
             paper_name(row.algorithm),
+            row.variant.label(),
             tasks.join(", "),
             row.runs,
             row.iqm,
@@ -201,17 +224,17 @@ fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: us
             row.interval.1
         );
     }
-    if let Some(first) = improvements.first() {
-        out += &format!(
-            "\n| condition | P({} > baseline) | baseline | 95% interval |\n|---|---:|---|---|\n",
-            paper_name(first.algorithm)
-        );
+    if !improvements.is_empty() {
+        out += "\n| condition | P(algorithm > baseline) | algorithm | protocol | baseline | protocol | 95% interval |\n|---|---:|---|---|---|---|---|\n";
         for row in improvements {
             out += &format!(
-                "| {} | {:.3} | {} | [{:.3}, {:.3}] |\n",
+                "| {} | {:.3} | {} | {} | {} | {} | [{:.3}, {:.3}] |\n",
                 row.condition.label(),
                 row.probability,
+                paper_name(row.algorithm),
+                row.variant.label(),
                 paper_name(row.baseline),
+                row.baseline_variant.label(),
                 row.interval.0,
                 row.interval.1
             );
@@ -222,14 +245,15 @@ fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: us
 
 fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
     let mut out = String::from(
-        "statistic,delay,delay_kind,actuator_noise,algorithm,baseline,runs,value,low,high\n",
+        "statistic,delay,delay_kind,actuator_noise,algorithm,protocol,baseline,baseline_protocol,runs,value,low,high\n",
     );
     let condition = |c: &Condition| format!("{},{},{}", c.delay, c.delay_kind(), c.actuator_noise);
     for r in iqms {
         out += &format!(
-            "iqm,{},{},,{},{:.6},{:.6},{:.6}\n",
+            "iqm,{},{},\"{}\",,,{},{:.6},{:.6},{:.6}\n",
             condition(&r.condition),
             r.algorithm,
+            r.variant.label(),
             r.runs,
             r.iqm,
             r.interval.0,
@@ -238,10 +262,12 @@ fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
     }
     for r in improvements {
         out += &format!(
-            "probability_of_improvement,{},{},{},,{:.6},{:.6},{:.6}\n",
+            "probability_of_improvement,{},{},\"{}\",{},\"{}\",,{:.6},{:.6},{:.6}\n",
             condition(&r.condition),
             r.algorithm,
+            r.variant.label(),
             r.baseline,
+            r.baseline_variant.label(),
             r.probability,
             r.interval.0,
             r.interval.1
@@ -252,12 +278,15 @@ fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
 
 /// Every evaluation of every run, one row each: what pandas or rliable load directly.
 fn long_csv(runs: &[RunResult]) -> String {
-    let mut out = String::from("algorithm,task,delay,delay_kind,actuator_noise,seed,step,return\n");
+    let mut out = String::from(
+        "algorithm,protocol,task,delay,delay_kind,actuator_noise,seed,step,return\n",
+    );
     for r in runs {
         for e in &r.evals {
             out += &format!(
-                "{},{},{},{},{},{},{},{}\n",
+                "{},\"{}\",{},{},{},{},{},{},{}\n",
                 r.algorithm,
+                r.variant.label(),
                 r.task,
                 r.condition.delay,
                 r.condition.delay_kind(),

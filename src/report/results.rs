@@ -3,8 +3,65 @@
 use std::path::{Path, PathBuf};
 
 use super::ReportError;
+use crate::algos::names;
+use crate::protocol::Protocol;
 use crate::tasks::TaskName;
 use crate::train::{EvalRow, TrainConfig, read_evals};
+
+/// A run folder's file naming the code it came from when that is not dhrl: its first line
+/// (e.g. `authors' code, JongsooLee/DHRL 296ac7b`), for runs converted from another
+/// implementation's logs (`scripts/authors_logs_to_runs.py`).
+pub const IMPLEMENTATION_FILE: &str = "implementation.txt";
+
+/// Which settings and code a run came from: dhrl under one of its protocols, or another
+/// implementation run under that protocol's settings. Tables, aggregates and curves keep
+/// variants apart.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Variant {
+    pub protocol: Protocol,
+    /// `None`: dhrl; else the implementation the run folder names.
+    pub implementation: Option<String>,
+}
+
+impl Variant {
+    /// `dhrl`, `authors`, or `authors (authors' code, …)`: the protocol, and the code where
+    /// it is not dhrl.
+    pub fn label(&self) -> String {
+        match &self.implementation {
+            None => self.protocol.name().to_string(),
+            Some(code) => format!("{} ({code})", self.protocol),
+        }
+    }
+}
+
+/// The (algorithm, variant) pairs `runs` hold: algorithms in registry order, each one's
+/// variants in order (dhrl's own code first).
+pub fn entries<'a>(runs: impl IntoIterator<Item = &'a RunResult>) -> Vec<(&'static str, Variant)> {
+    let present: std::collections::BTreeSet<(usize, Option<String>, Protocol)> = {
+        let order = names();
+        runs.into_iter()
+            .map(|r| {
+                let at = order.iter().position(|a| *a == r.algorithm).unwrap_or(usize::MAX);
+                (at, r.variant.implementation.clone(), r.variant.protocol)
+            })
+            .collect()
+    };
+    let order = names();
+    present
+        .into_iter()
+        .filter_map(|(at, implementation, protocol)| {
+            order.get(at).map(|a| {
+                (
+                    *a,
+                    Variant {
+                        protocol,
+                        implementation,
+                    },
+                )
+            })
+        })
+        .collect()
+}
 
 /// What a run's configuration puts it under: Table 1's cells are fixed delays without noise.
 #[derive(Debug, Clone, Copy, PartialEq, PartialOrd)]
@@ -70,6 +127,7 @@ pub struct RunResult {
     pub algorithm: &'static str,
     pub condition: Condition,
     pub seed: u64,
+    pub variant: Variant,
     /// The run's whole configuration but its seed (runs differing in more than the seed are
     /// other settings).
     pub setting: String,
@@ -77,6 +135,11 @@ pub struct RunResult {
 }
 
 impl RunResult {
+    /// Whether the run is of `algorithm` in `variant`.
+    pub fn is(&self, algorithm: &str, variant: &Variant) -> bool {
+        self.algorithm == algorithm && self.variant == *variant
+    }
+
     /// The last evaluation's step and mean return.
     pub fn final_eval(&self) -> (u64, f64) {
         let last = self
@@ -140,7 +203,7 @@ fn run_folders(input: &Path) -> Result<Vec<PathBuf>, ReportError> {
 }
 
 fn load_run(folder: &Path) -> Result<Option<RunResult>, ReportError> {
-    let config = TrainConfig::from_toml_file(&folder.join("config.toml"))?;
+    let config = TrainConfig::from_toml_file(&folder.join("config.toml"), None)?;
     if !folder.join("evals.csv").is_file() {
         return Ok(None);
     }
@@ -150,6 +213,16 @@ fn load_run(folder: &Path) -> Result<Option<RunResult>, ReportError> {
     }
     let delay = config.validate().map_err(crate::train::TrainError::from)?;
     let delay = config.delay.random_bound().unwrap_or(delay);
+    let implementation = match std::fs::read_to_string(folder.join(IMPLEMENTATION_FILE)) {
+        Ok(text) => text.lines().next().map(|line| line.trim().to_string()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => {
+            return Err(ReportError::Io {
+                path: folder.join(IMPLEMENTATION_FILE).display().to_string(),
+                message: e.to_string(),
+            });
+        }
+    };
     Ok(Some(RunResult {
         folder: folder.to_path_buf(),
         task: config.task,
@@ -160,6 +233,10 @@ fn load_run(folder: &Path) -> Result<Option<RunResult>, ReportError> {
             actuator_noise: config.delay.actuator_noise,
         },
         seed: config.seed,
+        variant: Variant {
+            protocol: config.protocol,
+            implementation,
+        },
         setting: toml::to_string(&TrainConfig {
             seed: 0,
             ..config.clone()

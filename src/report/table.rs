@@ -1,11 +1,12 @@
-//! Table 1's layout: rows Δ × algorithm (the delay-free reference first), a column per task,
+//! Table 1's layout: rows Δ × algorithm × protocol (the delay-free reference first; runs of
+//! another implementation apart), a column per task,
 //! mean ± std over seeds of each run's final evaluation, the best of each Δ block marked, the
 //! paper's published numbers beside ours.
 use std::collections::BTreeSet;
 
-use super::results::RunResult;
+use super::results::{RunResult, Variant, entries};
 use super::stats::mean_std;
-use crate::algos::{names, paper_name};
+use crate::algos::paper_name;
 use crate::tasks::TaskName;
 
 /// The paper's Table 1 (its arXiv LaTeX source, table `result-table`:
@@ -61,12 +62,8 @@ pub struct OurCell {
 #[derive(Debug, Clone)]
 pub struct Table {
     pub tasks: Vec<TaskName>,
-    /// `(Δ, algorithm, per task: ours, the paper's)`.
-    pub rows: Vec<(
-        usize,
-        &'static str,
-        Vec<(Option<OurCell>, Option<PaperCell>)>,
-    )>,
+    /// `(Δ, algorithm, variant, per task: ours, the paper's)`.
+    pub rows: Rows,
 }
 
 /// The table of the runs under fixed delays without actuator noise.
@@ -80,14 +77,14 @@ pub fn table1(runs: &[RunResult]) -> Table {
     let paper = paper_table1();
     let mut rows = Vec::new();
     for &delay in &delays {
-        for algorithm in names() {
+        for (algorithm, variant) in entries(runs.iter().copied()) {
             let cells: Vec<_> = tasks
                 .iter()
                 .map(|&task| {
                     let cell: Vec<&&RunResult> = runs
                         .iter()
                         .filter(|r| {
-                            r.condition.delay == delay && r.algorithm == algorithm && r.task == task
+                            r.condition.delay == delay && r.is(algorithm, &variant) && r.task == task
                         })
                         .collect();
                     let finals: Vec<(u64, f64)> = cell.iter().map(|r| r.final_eval()).collect();
@@ -112,7 +109,7 @@ pub fn table1(runs: &[RunResult]) -> Table {
                 })
                 .collect();
             if cells.iter().any(|c| c.0.is_some()) {
-                rows.push((delay, algorithm, cells));
+                rows.push((delay, algorithm, variant, cells));
             }
         }
     }
@@ -120,9 +117,10 @@ pub fn table1(runs: &[RunResult]) -> Table {
     Table { tasks, rows }
 }
 
-type Rows = Vec<(
+pub type Rows = Vec<(
     usize,
     &'static str,
+    Variant,
     Vec<(Option<OurCell>, Option<PaperCell>)>,
 )>;
 
@@ -134,10 +132,10 @@ fn mark_best(rows: &mut Rows, tasks: usize) {
                 .iter()
                 .enumerate()
                 .filter(|(_, r)| r.0 == delay)
-                .filter_map(|(i, r)| r.2[t].0.as_ref().map(|c| (i, c.mean)))
+                .filter_map(|(i, r)| r.3[t].0.as_ref().map(|c| (i, c.mean)))
                 .max_by(|a, b| a.1.total_cmp(&b.1));
             if let Some((i, _)) = best
-                && let Some(cell) = rows[i].2[t].0.as_mut()
+                && let Some(cell) = rows[i].3[t].0.as_mut()
             {
                 cell.best = true;
             }
@@ -155,15 +153,20 @@ fn delay_label(delay: usize) -> String {
 
 impl Table {
     pub fn markdown(&self) -> String {
-        let mut out = String::from("| Δ | algorithm |");
+        let mut out = String::from("| Δ | algorithm | protocol |");
         for task in &self.tasks {
             out += &format!(" {task} (ours) | {task} (paper) |");
         }
-        out += "\n|---|---|";
+        out += "\n|---|---|---|";
         out += &"---:|---:|".repeat(self.tasks.len());
         out += "\n";
-        for (delay, algorithm, cells) in &self.rows {
-            out += &format!("| {} | {} |", delay_label(*delay), paper_name(algorithm));
+        for (delay, algorithm, variant, cells) in &self.rows {
+            out += &format!(
+                "| {} | {} | {} |",
+                delay_label(*delay),
+                paper_name(algorithm),
+                variant.label()
+            );
             for (ours, paper) in cells {
                 let ours = ours.as_ref().map_or("".into(), |c| {
                     let text = format!(
@@ -190,23 +193,27 @@ impl Table {
         let mut out = format!(
             "% dhrl report: mean ± std over seeds (their number in brackets) of the final\n\
              % evaluation; the paper's Table 1 beside; the best of each Δ in bold.\n\
-             \\begin{{tabular}}{{ll{}}}\n\\hline\n$\\Delta$ & Algorithm",
+             \\begin{{tabular}}{{lll{}}}\n\\hline\n$\\Delta$ & Algorithm & Protocol",
             "rr".repeat(self.tasks.len())
         );
         for task in &self.tasks {
             out += &format!(" & \\multicolumn{{2}}{{c}}{{{}}}", task.gymnasium_id());
         }
-        out += " \\\\\n &";
+        out += " \\\\\n & &";
         out += &" & ours & paper".repeat(self.tasks.len());
         out += " \\\\\n\\hline\n";
         let mut previous = None;
-        for (delay, algorithm, cells) in &self.rows {
+        for (delay, algorithm, variant, cells) in &self.rows {
             if previous.is_some() && previous != Some(*delay) {
                 out += "\\hline\n";
             }
             previous = Some(*delay);
             let name = latex_name(paper_name(algorithm));
-            out += &format!("{} & {name}", delay_label(*delay).replace('–', "--"));
+            out += &format!(
+                "{} & {name} & {}",
+                delay_label(*delay).replace('–', "--"),
+                variant.label().replace('\'', "'")
+            );
             for (ours, paper) in cells {
                 let bold = |text: String, best: bool| {
                     if best {
@@ -240,16 +247,20 @@ impl Table {
 
     pub fn csv(&self) -> String {
         let mut out = String::from(
-            "delay,algorithm,task,seeds,mean,std,final_step,best,paper_mean,paper_std\n",
+            "delay,algorithm,protocol,implementation,task,seeds,mean,std,final_step,best,mixed,paper_mean,paper_std\n",
         );
-        for (delay, algorithm, cells) in &self.rows {
+        for (delay, algorithm, variant, cells) in &self.rows {
+            let (protocol, implementation) = (
+                variant.protocol,
+                variant.implementation.as_deref().unwrap_or("dhrl").replace(',', ";"),
+            );
             for (task, (ours, paper)) in self.tasks.iter().zip(cells) {
                 let Some(c) = ours else { continue };
                 let (pm, ps) = paper.as_ref().map_or((String::new(), String::new()), |p| {
                     (p.mean.to_string(), p.std.to_string())
                 });
                 out += &format!(
-                    "{delay},{algorithm},{task},{},{:.3},{:.3},{},{},{},{pm},{ps}\n",
+                    "{delay},{algorithm},{protocol},\"{implementation}\",{task},{},{:.3},{:.3},{},{},{},{pm},{ps}\n",
                     c.seeds, c.mean, c.std, c.final_step, c.best, c.mixed
                 );
             }
@@ -261,7 +272,7 @@ impl Table {
     pub fn mixed(&self) -> bool {
         self.rows
             .iter()
-            .any(|r| r.2.iter().any(|c| c.0.as_ref().is_some_and(|o| o.mixed)))
+            .any(|r| r.3.iter().any(|c| c.0.as_ref().is_some_and(|o| o.mixed)))
     }
 
     /// The distinct final-evaluation steps of the table's cells.
@@ -269,7 +280,7 @@ impl Table {
         self.rows
             .iter()
             .flat_map(|r| {
-                r.2.iter()
+                r.3.iter()
                     .filter_map(|c| c.0.as_ref().map(|o| o.final_step))
             })
             .collect()

@@ -111,7 +111,7 @@ impl Experiment {
             for name in &self.algorithms {
                 let info = algorithm(name)?.info();
                 let given = self.algo.get(name).cloned().unwrap_or_default();
-                let algo = AlgoSettings::with_fields(name, &given)?;
+                let algo = AlgoSettings::under(base.protocol, name, &given)?;
                 let grid: Vec<(DelayKind, usize)> = if info.undelayed_only {
                     vec![(DelayKind::Fixed, 0)]
                 } else {
@@ -263,24 +263,8 @@ fn base_config(train: &toml::Table) -> Result<TrainConfig, SweepError> {
             )));
         }
     }
-    let mut table = toml::Table::try_from(TrainConfig::default()).map_err(|e| {
-        SweepError::Invalid(format!("the default configuration does not serialise: {e}"))
-    })?;
-    merge(&mut table, train);
-    toml::Value::Table(table)
-        .try_into()
-        .map_err(|e: toml::de::Error| SweepError::Invalid(format!("[train]: {e}")))
-}
-
-fn merge(into: &mut toml::Table, from: &toml::Table) {
-    for (key, value) in from {
-        match (into.get_mut(key), value) {
-            (Some(toml::Value::Table(inner)), toml::Value::Table(given)) => merge(inner, given),
-            _ => {
-                into.insert(key.clone(), value.clone());
-            }
-        }
-    }
+    TrainConfig::over_protocol_defaults(train.clone(), None)
+        .map_err(|e| SweepError::Invalid(format!("[train]: {e}")))
 }
 
 /// `<task>-<algo>-d<Δ>[-n<σ>]-s<seed>-<hash>` (`r<Δ>` for random delays): readable, and

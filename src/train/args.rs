@@ -10,6 +10,7 @@ use super::{ConfigError, Start, TrainConfig, TrainError};
 use crate::algos::{AlgoError, AlgoSettings, names, parse_assignment};
 use crate::delay::{DelayArgs, DelayDevice};
 use crate::learn::LearnDevice;
+use crate::protocol::Protocol;
 use crate::tasks::TaskName;
 
 fn algo_names() -> clap::builder::PossibleValuesParser {
@@ -18,6 +19,12 @@ fn algo_names() -> clap::builder::PossibleValuesParser {
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct TrainArgs {
+    /// Whose settings fill in what the paper leaves open: dhrl's own, or the authors' released
+    /// code's (λ = 10 held then decayed over the run's steps, K = 100, one shared α, 10,000
+    /// random steps, orthogonal initialisation; docs/DESIGN.md §3.4). Every setting it fills
+    /// in can still be overridden.
+    #[arg(long, value_enum)]
+    pub protocol: Option<Protocol>,
     /// The MuJoCo task (Gymnasium v4).
     #[arg(long, value_enum)]
     pub task: Option<TaskName>,
@@ -50,9 +57,15 @@ pub struct TrainArgs {
     /// Simulation threads.
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Uniform random steps before learning starts.
+    /// Uniform random steps before the policy acts.
     #[arg(long)]
     pub warmup_steps: Option<u64>,
+    /// The environment step from which updates run (default: when the warm-up ends).
+    #[arg(long, value_name = "STEP")]
+    pub learning_starts: Option<u64>,
+    /// Run updates in blocks, one every N environment steps (N × updates per step each).
+    #[arg(long, value_name = "N")]
+    pub update_every: Option<u64>,
     /// Environment steps between evaluations of the deterministic policy (one at the end too).
     #[arg(long)]
     pub eval_every: Option<u64>,
@@ -179,8 +192,8 @@ impl TrainArgs {
     /// The configuration of a new run: defaults, then `--config`, then flags.
     pub fn config(&self) -> Result<TrainConfig, TrainError> {
         let mut c = match &self.config {
-            Some(path) => TrainConfig::from_toml_file(path)?,
-            None => TrainConfig::default(),
+            Some(path) => TrainConfig::from_toml_file(path, self.protocol)?,
+            None => TrainConfig::for_protocol(self.protocol.unwrap_or_default(), None)?,
         };
         c.task = self.task.unwrap_or(c.task);
         c.algo = self.algo(c.algo)?;
@@ -190,6 +203,8 @@ impl TrainArgs {
         c.envs = self.envs.unwrap_or(c.envs);
         c.threads = self.threads.unwrap_or(c.threads);
         c.warmup_steps = self.warmup_steps.unwrap_or(c.warmup_steps);
+        c.learning_starts = self.learning_starts.or(c.learning_starts);
+        c.update_every = self.update_every.unwrap_or(c.update_every);
         c.eval_every = self.eval_every.unwrap_or(c.eval_every);
         c.eval_episodes = self.eval_episodes.unwrap_or(c.eval_episodes);
         c.checkpoint_every = self.checkpoint_every.unwrap_or(c.checkpoint_every);
@@ -205,6 +220,7 @@ impl TrainArgs {
     pub fn settings_given(&self) -> Vec<&'static str> {
         let d = &self.delay;
         [
+            ("--protocol", self.protocol.is_some()),
             ("--task", self.task.is_some()),
             ("--algo", self.algo.is_some()),
             ("--set", !self.set.is_empty()),
@@ -219,6 +235,8 @@ impl TrainArgs {
             ("--envs", self.envs.is_some()),
             ("--threads", self.threads.is_some()),
             ("--warmup-steps", self.warmup_steps.is_some()),
+            ("--learning-starts", self.learning_starts.is_some()),
+            ("--update-every", self.update_every.is_some()),
             ("--eval-every", self.eval_every.is_some()),
             ("--eval-episodes", self.eval_episodes.is_some()),
             ("--checkpoint-every", self.checkpoint_every.is_some()),

@@ -5,11 +5,15 @@ use serde::{Deserialize, Serialize};
 use crate::algos::{AlgoError, AlgoSettings, algorithm, names_where, reference};
 use crate::delay::{DEFAULT_CAPACITY, DelayConfig, DelayDevice, DelayError};
 use crate::learn::LearnDevice;
+use crate::protocol::{Protocol, merge_tables};
 use crate::tasks::TaskName;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
+    /// Whose settings filled in what the paper leaves open ([`Protocol`]): the defaults of
+    /// every field below and of `[algo]`'s.
+    pub protocol: Protocol,
     /// The MuJoCo task.
     pub task: TaskName,
     /// The delays, their warm-up actions and the actuator noise (`[delay]`).
@@ -22,8 +26,19 @@ pub struct TrainConfig {
     pub envs: usize,
     /// Simulation threads.
     pub threads: usize,
-    /// Environment steps with uniform random actions before learning starts.
+    /// Environment steps with uniform random actions.
     pub warmup_steps: u64,
+    /// The environment step from which updates run (absent: when the warm-up ends; the
+    /// authors' code updates from step 100, inside its random phase).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub learning_starts: Option<u64>,
+    /// Steps the replay must hold before the first update (0: any complete transition; the
+    /// authors' code waits for a batch, 256).
+    pub min_replay_steps: usize,
+    /// Updates come in blocks, one every this many environment steps, each of
+    /// `update_every × updates_per_step` updates (1: every step; the authors' code runs 50
+    /// updates every 50 steps).
+    pub update_every: u64,
     /// Gradient updates per environment step.
     pub updates_per_step: f64,
     /// Transitions per gradient update.
@@ -58,6 +73,7 @@ impl Default for TrainConfig {
     /// A short, sensible default: delay-free SAC on InvertedPendulum, learning within minutes.
     fn default() -> TrainConfig {
         TrainConfig {
+            protocol: Protocol::Dhrl,
             task: TaskName::InvertedPendulum,
             delay: DelayConfig::default(),
             steps: 20_000,
@@ -65,6 +81,9 @@ impl Default for TrainConfig {
             envs: 1,
             threads: 1,
             warmup_steps: 1_000,
+            learning_starts: None,
+            min_replay_steps: 0,
+            update_every: 1,
             updates_per_step: 1.0,
             batch_size: 256,
             replay_capacity: DEFAULT_CAPACITY,
@@ -82,6 +101,41 @@ impl Default for TrainConfig {
 }
 
 impl TrainConfig {
+    /// The defaults of `protocol`, with `algo`'s (the delay-free reference when `None`).
+    pub fn for_protocol(protocol: Protocol, algo: Option<&str>) -> Result<TrainConfig, ConfigError> {
+        let algo = AlgoSettings::under(protocol, algo.unwrap_or(reference().name), &toml::Table::new())?;
+        let dhrl = TrainConfig {
+            protocol,
+            algo,
+            ..TrainConfig::default()
+        };
+        Ok(match protocol {
+            Protocol::Dhrl => dhrl,
+            Protocol::Authors => TrainConfig {
+                warmup_steps: 10_000,
+                learning_starts: Some(100),
+                min_replay_steps: 256,
+                update_every: 50,
+                ..dhrl
+            },
+        })
+    }
+
+    /// The environment step from which updates run.
+    pub fn first_update_step(&self) -> u64 {
+        self.learning_starts.unwrap_or(self.warmup_steps)
+    }
+
+    /// This configuration with what its algorithm schedules over the run's budget fixed to
+    /// [`TrainConfig::steps`] ([`crate::algos::AlgoConfig::for_budget`]): what a fresh run
+    /// records.
+    pub fn with_budget_fixed(&self) -> TrainConfig {
+        TrainConfig {
+            algo: self.algo.for_budget(self.steps),
+            ..self.clone()
+        }
+    }
+
     /// The runs one learner pass serves ([`TrainConfig::runs_per_pass`], 0 resolved).
     pub fn runs_per_learner_pass(&self) -> usize {
         match (self.runs_per_pass, self.device) {
@@ -106,6 +160,9 @@ pub enum ConfigError {
     Algo(#[from] AlgoError),
     #[error(transparent)]
     NegativeDelay(#[from] crate::delay::NegativeDelay),
+    /// A config table's fields do not read (what [`ConfigError::Read`] names the file of).
+    #[error("{0}")]
+    Fields(String),
     #[error("cannot read config file {path}: {message}")]
     Read { path: String, message: String },
     #[error(
@@ -142,9 +199,13 @@ fn check(
 }
 
 impl TrainConfig {
-    /// Reads a TOML config (any subset of the fields; the rest default). Files written before
-    /// the `[algo]` table (`algo = "NAME"` with `[hyper]` and `[lifting]`) are read too.
-    pub fn from_toml_file(path: &std::path::Path) -> Result<TrainConfig, ConfigError> {
+    /// Reads a TOML config (any subset of the fields; the rest take the defaults of the
+    /// file's `protocol`, else of `protocol`, else dhrl's). Files written before the `[algo]`
+    /// table (`algo = "NAME"` with `[hyper]` and `[lifting]`) are read too.
+    pub fn from_toml_file(
+        path: &std::path::Path,
+        protocol: Option<Protocol>,
+    ) -> Result<TrainConfig, ConfigError> {
         let read_error = |message: String| ConfigError::Read {
             path: path.display().to_string(),
             message,
@@ -154,9 +215,61 @@ impl TrainConfig {
             .parse()
             .map_err(|e: toml::de::Error| read_error(e.to_string()))?;
         fold_legacy_algo_tables(&mut table)?;
-        toml::Value::Table(table)
+        TrainConfig::over_protocol_defaults(table, protocol).map_err(|e| match e {
+            ConfigError::Fields(message) => read_error(message),
+            other => other,
+        })
+    }
+
+    /// A config table (any subset of the fields) over the defaults of its `protocol`, else of
+    /// `protocol`, else dhrl's; a table that names another protocol than `protocol` is refused.
+    pub fn over_protocol_defaults(
+        mut table: toml::Table,
+        protocol: Option<Protocol>,
+    ) -> Result<TrainConfig, ConfigError> {
+        let read_error = ConfigError::Fields;
+        let named: Option<Protocol> = match table.get("protocol") {
+            Some(value) => Some(
+                value
+                    .clone()
+                    .try_into()
+                    .map_err(|e: toml::de::Error| read_error(format!("protocol: {e}")))?,
+            ),
+            None => None,
+        };
+        if let (Some(named), Some(asked)) = (named, protocol)
+            && named != asked
+        {
+            return Err(ConfigError::Invalid {
+                what: "--protocol",
+                accepted: "the protocol the config file names, or none",
+                value: format!("{asked}, where the file says protocol = \"{named}\""),
+            });
+        }
+        let protocol = named.or(protocol).unwrap_or_default();
+        let algo = match table.get("algo") {
+            Some(toml::Value::String(name)) => Some(name.clone()),
+            Some(toml::Value::Table(algo)) => algo
+                .get("name")
+                .and_then(toml::Value::as_str)
+                .map(str::to_string),
+            _ => None,
+        };
+        let defaults = TrainConfig::for_protocol(protocol, algo.as_deref())?;
+        let mut merged = toml::Table::try_from(&defaults)
+            .map_err(|e| read_error(format!("the defaults do not serialise: {e}")))?;
+        if let Some(toml::Value::String(name)) = table.get("algo") {
+            let name = toml::Value::String(name.clone());
+            table.insert("algo".into(), toml::Value::Table(toml::Table::from_iter([("name".into(), name)])));
+        }
+        merge_tables(&mut merged, table);
+        let config: TrainConfig = toml::Value::Table(merged)
             .try_into()
-            .map_err(|e: toml::de::Error| read_error(e.to_string()))
+            .map_err(|e: toml::de::Error| read_error(e.to_string()))?;
+        Ok(TrainConfig {
+            algo: config.algo.clone().tagged(config.protocol),
+            ..config
+        })
     }
 
     /// Checks every field and returns the total delay Δ (the algorithm's fields are checked
@@ -178,6 +291,18 @@ impl TrainConfig {
             .into());
         }
         check(self.steps > 0, "steps", "at least 1", self.steps)?;
+        check(
+            self.protocol != Protocol::Authors || self.envs == 1,
+            "envs",
+            "1 under the authors' protocol (their code steps one environment copy)",
+            self.envs,
+        )?;
+        check(
+            self.update_every > 0,
+            "update_every",
+            "at least 1",
+            self.update_every,
+        )?;
         check(self.envs > 0, "envs", "at least 1", self.envs)?;
         check(self.threads > 0, "threads", "at least 1", self.threads)?;
         check(

@@ -73,7 +73,7 @@ pub fn read_evals(run: &Path) -> Result<Vec<EvalRow>, TrainError> {
 pub fn summarize_runs(runs: &[PathBuf]) -> Result<Vec<CurveSummary>, TrainError> {
     let mut groups: BTreeMap<String, Vec<(u64, Vec<EvalRow>)>> = BTreeMap::new();
     for run in runs {
-        let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
+        let config = TrainConfig::from_toml_file(&run.join("config.toml"), None)?;
         let delay = config.validate()?;
         let mut label = format!("{} {} Δ={delay}", config.task, config.algo);
         for (symbol, field) in config.algo.info().label_fields {

@@ -225,18 +225,19 @@ fn prepare(
                 return Err(TrainError::OutputExists(run.display().to_string()));
             }
             config.validate()?;
+            let config = config.with_budget_fixed();
             std::fs::create_dir_all(run).map_err(io_error(run))?;
             lock = lock_run(run)?;
-            let text = toml::to_string(config).map_err(|e| TrainError::Io {
+            let text = toml::to_string(&config).map_err(|e| TrainError::Io {
                 path: "config.toml".into(),
                 message: e.to_string(),
             })?;
             let path = run.join("config.toml");
             crate::files::write_atomically(&path, text).map_err(io_error(&path))?;
-            config.clone()
+            config
         }
         Start::Resume => {
-            let saved = TrainConfig::from_toml_file(&run.join("config.toml"))?;
+            let saved = TrainConfig::from_toml_file(&run.join("config.toml"), None)?;
             lock = lock_run(run)?;
             // A run that failed in a stack and is tried again.
             let failed = run.join(FAILED);
@@ -256,6 +257,14 @@ fn prepare(
                 ..saved
             };
             if merged.steps != saved.steps {
+                if let Some(budget) = merged.algo.budget() {
+                    eprintln!(
+                        "note: {}: extended to {} steps; the schedule [algo] spans over the \
+                         run's budget keeps its original {budget} steps (config.toml)",
+                        run.display(),
+                        merged.steps,
+                    );
+                }
                 let path = run.join("config.toml");
                 let text = toml::to_string(&merged).map_err(|e| TrainError::Io {
                     path: "config.toml".into(),
@@ -962,9 +971,18 @@ impl Trainer {
             let env_steps = self.slots[0].state.env_steps;
             bar.set_position(env_steps);
             set_walls(&mut self.slots);
-            if env_steps >= c.warmup_steps {
+            let learning = env_steps >= c.first_update_step()
+                && self
+                    .slots
+                    .iter()
+                    .all(|slot| slot.replay.len() >= c.min_replay_steps);
+            if learning {
+                // One block of `update_every × updates_per_step` updates each time the step
+                // count passes a multiple of `update_every` (every step's share when it is 1).
+                let blocks = env_steps / c.update_every - (env_steps - c.envs as u64) / c.update_every;
+                let owed = (blocks * c.update_every) as f64 * c.updates_per_step;
                 for slot in &mut self.slots {
-                    slot.state.update_debt += c.envs as f64 * c.updates_per_step;
+                    slot.state.update_debt += owed;
                 }
                 while self.slots[0].state.update_debt >= 1.0 {
                     for slot in &mut self.slots {
@@ -1029,7 +1047,7 @@ pub struct SavedRun {
 /// Loads the agent of `run`'s latest checkpoint, built for the total delay `delay` (by
 /// default the trained one, the only one a policy on `x_t` takes).
 pub fn load_saved(run: &Path, delay: Option<usize>) -> Result<SavedRun, TrainError> {
-    let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
+    let config = TrainConfig::from_toml_file(&run.join("config.toml"), None)?;
     load_checkpoint(run, config, delay)
 }
 
@@ -1107,7 +1125,7 @@ pub fn evaluate_saved(
     delay_free_policy: bool,
     seed: u64,
 ) -> Result<EvalResult, TrainError> {
-    let config = TrainConfig::from_toml_file(&run.join("config.toml"))?;
+    let config = TrainConfig::from_toml_file(&run.join("config.toml"), None)?;
     let trained_delay = config.validate()?;
     let eval_delay = match (delay_free_policy, delay.any()) {
         (true, true) => {
