@@ -11,8 +11,8 @@ use std::sync::Mutex;
 use burn::prelude::*;
 use common::{parameters, small_spec as spec, update};
 use dhrl::algos::{
-    ActMode, Agent, AgentSpec, AlgoSettings, Bpql, D2hpg, D2hpgConfig, InputView, LiftingNoise,
-    LiftingReduction, LiftingSchedule, Regular, SacAgent, SacBatch, SacConfig, SacLearner,
+    ActMode, Agent, AgentSpec, AlgoSettings, Bpql, D2hpg, D2hpgConfig, InputView, LiftingConfig,
+    LiftingNoise, LiftingSchedule, Reduction, Regular, SacAgent, SacBatch, SacConfig, SacLearner,
     random_batch,
 };
 use dhrl::delay::Transitions;
@@ -60,8 +60,11 @@ fn lifting_loss_matches_hand_values() {
 /// D2HPG's defaults with lifting weight λ and K samples.
 fn lifting(weight: f64, samples: usize) -> D2hpgConfig {
     D2hpgConfig {
-        lifting_weight: weight,
-        lifting_samples: samples,
+        lifting: LiftingConfig {
+            lifting_weight: weight,
+            lifting_samples: samples,
+            ..LiftingConfig::default()
+        },
         ..D2hpgConfig::default()
     }
 }
@@ -317,7 +320,9 @@ fn bpql_and_d2hpg_learn_where_broken_variants_do_not() {
 /// 0 at 75%, 0 after; dhrl's constant. The budget is the run's own, fixed when it starts.
 #[test]
 fn the_authors_lifting_weight_holds_then_decays_over_the_budget() {
-    let authors = D2hpgConfig::protocol_defaults(Protocol::Authors).with_budget(20_000);
+    let authors = D2hpgConfig::protocol_defaults(Protocol::Authors)
+        .lifting
+        .with_budget(20_000);
     assert_eq!(authors.lifting_schedule, LiftingSchedule::HoldDecay);
     for (step, weight) in [
         (0, 10.0),
@@ -329,17 +334,22 @@ fn the_authors_lifting_weight_holds_then_decays_over_the_budget() {
         (20_000, 0.0), // 100%
         (40_000, 0.0), // an extension's steps
     ] {
-        let at = authors.lifting_weight_at(step);
-        assert!((at - weight).abs() < 1e-12, "λ at step {step}: {at}, not {weight}");
+        let at = authors.weight_at(step);
+        assert!(
+            (at - weight).abs() < 1e-12,
+            "λ at step {step}: {at}, not {weight}"
+        );
     }
     // Fixed once: a later budget (an extended run) leaves the schedule where it was.
     assert_eq!(authors.with_budget(40_000).lifting_budget, 20_000);
     assert_eq!(authors.scheduled_budget(), Some(20_000));
-    let dhrl = D2hpgConfig::protocol_defaults(Protocol::Dhrl).with_budget(20_000);
+    let dhrl = D2hpgConfig::protocol_defaults(Protocol::Dhrl)
+        .lifting
+        .with_budget(20_000);
     assert_eq!(dhrl.lifting_budget, 0, "a constant λ is fixed to no budget");
     assert_eq!(dhrl.scheduled_budget(), None);
     for step in [0, 10_000, 20_000] {
-        assert_eq!(dhrl.lifting_weight_at(step), 1.0);
+        assert_eq!(dhrl.weight_at(step), 1.0);
     }
     // What each protocol sets, through the registry (as `--protocol` reads it).
     let fields = AlgoSettings::under(Protocol::Authors, "d2hpg", &toml::Table::new())
@@ -353,19 +363,25 @@ fn the_authors_lifting_weight_holds_then_decays_over_the_budget() {
         ("shared_temperature", toml::Value::Boolean(true)),
         ("network_init", toml::Value::String("orthogonal".into())),
     ] {
-        assert_eq!(fields[field], value, "d2hpg's {field} under the authors' protocol");
+        assert_eq!(
+            fields[field], value,
+            "d2hpg's {field} under the authors' protocol"
+        );
     }
     let naive = AlgoSettings::under(Protocol::Authors, "d2hpg-naive", &toml::Table::new())
         .unwrap()
         .fields();
     assert_eq!(naive["lifting_schedule"].as_str(), Some("constant"));
-    assert_eq!(naive["autotune_alpha"].as_bool(), Some(false), "their naive α stays at 0.2");
+    assert_eq!(
+        naive["autotune_alpha"].as_bool(),
+        Some(false),
+        "their naive α stays at 0.2"
+    );
     assert_eq!(naive["lifting_weight"].as_float(), Some(10.0));
     let bpql = AlgoSettings::under(Protocol::Authors, "bpql", &toml::Table::new())
         .unwrap()
         .fields();
     assert_eq!(bpql["network_init"].as_str(), Some("orthogonal"));
-    assert!(AlgoSettings::under(Protocol::Authors, "d2hpg-principled", &toml::Table::new()).is_err());
 }
 
 /// At Δ = 0 with the regular policy set to the delay-free one, L_lift compares one
@@ -376,12 +392,10 @@ fn the_authors_lifting_weight_holds_then_decays_over_the_budget() {
 fn the_lifting_draws_are_common_or_independent_as_configured() {
     let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let (spec, d) = (spec(0), devices());
-    let loss = |noise: LiftingNoise, reduction: LiftingReduction| {
-        let config = D2hpgConfig {
-            lifting_noise: noise,
-            lifting_reduction: reduction,
-            ..lifting(1.0, 8)
-        };
+    let loss = |noise: LiftingNoise, reduction: Reduction| {
+        let mut config = lifting(1.0, 8);
+        config.lifting.lifting_noise = noise;
+        config.lifting.lifting_reduction = reduction;
         let mut agent = D2hpg::new(Regular::Bpql, &config, &spec, &d, &[3]);
         let dir = tempfile::tempdir().unwrap();
         agent.save(dir.path()).unwrap();
@@ -398,13 +412,19 @@ fn the_lifting_draws_are_common_or_independent_as_configured() {
         let stats = update(&mut agent, &b);
         stats.iter().find(|(n, _)| *n == "lifting_loss").unwrap().1
     };
-    let common = loss(LiftingNoise::Common, LiftingReduction::Sum);
-    assert!(common.abs() < 1e-9, "one distribution, common noise: L_lift = {common}");
-    let (summed, averaged) = (
-        loss(LiftingNoise::Independent, LiftingReduction::Sum),
-        loss(LiftingNoise::Independent, LiftingReduction::Mean),
+    let common = loss(LiftingNoise::Common, Reduction::Sum);
+    assert!(
+        common.abs() < 1e-9,
+        "one distribution, common noise: L_lift = {common}"
     );
-    assert!(summed > 1e-3, "independent draws of one distribution: L_lift = {summed}");
+    let (summed, averaged) = (
+        loss(LiftingNoise::Independent, Reduction::Sum),
+        loss(LiftingNoise::Independent, Reduction::Mean),
+    );
+    assert!(
+        summed > 1e-3,
+        "independent draws of one distribution: L_lift = {summed}"
+    );
     assert!(
         (summed - 2.0 * averaged).abs() < 1e-6 * summed,
         "the mean over 2 action dimensions is half the sum: {summed} vs {averaged}"
@@ -439,14 +459,26 @@ fn the_delay_free_learner_reads_the_regular_alpha_when_one_is_shared() {
         }
         copy
     };
-    let (regular_alpha, own_alpha) = (regular.temperature.alphas()[0], free(false).temperature.alphas()[0]);
-    assert!((own_alpha - 0.2).abs() < 1e-6, "the delay-free α was tuned: {own_alpha}");
-    assert!((regular_alpha - 0.2).abs() > 1e-5, "the regular α did not move: {regular_alpha}");
+    let (regular_alpha, own_alpha) = (
+        regular.temperature.alphas()[0],
+        free(false).temperature.alphas()[0],
+    );
+    assert!(
+        (own_alpha - 0.2).abs() < 1e-6,
+        "the delay-free α was tuned: {own_alpha}"
+    );
+    assert!(
+        (regular_alpha - 0.2).abs() > 1e-5,
+        "the regular α did not move: {regular_alpha}"
+    );
 
     let b = batch(&spec, 32, 99);
     let stats = update(&mut agent, &b);
     let free_alpha = stats.iter().find(|(n, _)| *n == "free_alpha").unwrap().1;
-    assert!((free_alpha - regular_alpha).abs() < 1e-6, "free_alpha logs {free_alpha}");
+    assert!(
+        (free_alpha - regular_alpha).abs() < 1e-6,
+        "free_alpha logs {free_alpha}"
+    );
     let after = tempfile::tempdir().unwrap();
     agent.save(after.path()).unwrap();
     let stepped = saved_learner(after.path(), "delay_free_", obs, obs, &spec);
@@ -483,7 +515,10 @@ fn d2hpg_sac_without_lifting_is_augmented_sac_whose_critic_reads_x() {
     }
     let probe = batch(&spec, 8, 17);
     let acts = d2hpg_sac.act(&probe.augmented, 8, ActMode::Deterministic);
-    assert_eq!(acts, augmented.act(&probe.augmented, 8, ActMode::Deterministic));
+    assert_eq!(
+        acts,
+        augmented.act(&probe.augmented, 8, ActMode::Deterministic)
+    );
     assert_ne!(acts, bpql.act(&probe.augmented, 8, ActMode::Deterministic));
 }
 
@@ -504,7 +539,8 @@ fn orthogonal_layers_are_orthonormal_with_zero_biases() {
     struct Layers(Vec<(Vec<usize>, Vec<f32>)>);
     impl burn::module::ModuleVisitor for Layers {
         fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
-            self.0.push((param.val().dims().to_vec(), to_vec(param.val())));
+            self.0
+                .push((param.val().dims().to_vec(), to_vec(param.val())));
         }
     }
     let layers = |l: &SacLearner| {
@@ -532,7 +568,11 @@ fn orthogonal_layers_are_orthonormal_with_zero_biases() {
         worst
     };
     let drawn = layers(&learner(NetworkInit::Orthogonal));
-    assert_eq!(drawn.iter().filter(|(d, _)| d.len() == 3).count(), 10, "4 actor and 2 × 3 critic layers");
+    assert_eq!(
+        drawn.iter().filter(|(d, _)| d.len() == 3).count(),
+        10,
+        "4 actor and 2 × 3 critic layers"
+    );
     for (dims, values) in &drawn {
         match dims.len() {
             3 => assert!(orthonormal(dims, values) < 1e-5, "layer {dims:?}"),
@@ -541,9 +581,15 @@ fn orthogonal_layers_are_orthonormal_with_zero_biases() {
         }
     }
     let default = layers(&learner(NetworkInit::Burn));
-    assert!(default.iter().any(|(d, v)| d.len() == 2 && v.iter().any(|b| *b != 0.0)));
-    assert!(default
-        .iter()
-        .filter(|(d, _)| d.len() == 3)
-        .any(|(d, v)| orthonormal(d, v) > 0.1));
+    assert!(
+        default
+            .iter()
+            .any(|(d, v)| d.len() == 2 && v.iter().any(|b| *b != 0.0))
+    );
+    assert!(
+        default
+            .iter()
+            .filter(|(d, _)| d.len() == 3)
+            .any(|(d, v)| orthonormal(d, v) > 0.1)
+    );
 }

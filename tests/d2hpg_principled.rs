@@ -10,14 +10,16 @@ use burn::module::Param;
 use burn::prelude::*;
 use common::{parameters, small_spec as spec, update};
 use dhrl::algos::{
-    AbstractReward, ActMode, Agent, Bpql, D2hpgPrincipled, D2hpgPrincipledConfig, Distance,
-    Homomorphism, LaxMetric, MetricReduction, RegularCritic, SacConfig, TransitionLoss,
-    abstract_model_loss, gaussian_w2, lax_loss, random_batch,
+    AbstractReward, ActMode, ActionMap, Agent, AlgoSettings, Bpql, D2hpgPrincipled,
+    D2hpgPrincipledConfig, Distance, Homomorphism, LaxMetric, LiftingConfig, MetricReduction,
+    Reduction, RegularCritic, SacConfig, TransitionLoss, TransitionStd, abstract_model_loss,
+    gaussian_w2, lax_loss, random_batch,
 };
 use dhrl::learn::{
     Devices, LearnDevice, Mlp, Noise, StackedLinear, TransitionTensors, lifting_loss, matrix,
     to_vec,
 };
+use dhrl::protocol::Protocol;
 
 /// burn's generator is process-wide: networks built by concurrent tests would interleave draws.
 static BUILD: Mutex<()> = Mutex::new(());
@@ -180,15 +182,16 @@ fn abstract_model_loss_matches_hand_values() {
     let next = m(&[1.0, 1.0, 0.0, 0.0], 2, &d);
     let eps = m(&[0.5, -1.0, 0.0, 0.0], 2, &d);
     let rewards = (m(&[0.3, 1.0], 2, &d), m(&[1.0, 1.0], 2, &d));
-    let loss = |form| {
+    let loss_in = |form, reduction| {
         to_vec(abstract_model_loss(
             transition.clone(),
             next.clone(),
             eps.clone(),
             rewards.clone(),
-            form,
+            (form, reduction),
         ))[0]
     };
+    let loss = |form| loss_in(form, Reduction::Sum);
     // NLL: ½(−1/1)² + ln 1 + ½(0/2)² + ln 2, plus (0.3 − 1)² = 0.49; halved by the mean.
     close(
         loss(TransitionLoss::GaussianNll),
@@ -201,6 +204,60 @@ fn abstract_model_loss_matches_hand_values() {
         4.74 / 2.0,
         "L_h, sampled squared error",
     );
+    // The authors' NLL averages over the two dimensions (the reward's term stays whole).
+    close(
+        loss_in(TransitionLoss::GaussianNll, Reduction::Mean),
+        ((0.5 + 2f64.ln()) / 2.0 + 0.49) / 2.0,
+        "L_h, Gaussian NLL averaged over dimensions",
+    );
+}
+
+/// `P̄_τ`'s σ from its network's output u: the authors' `exp(clamp(u, −5, 2))`, against the
+/// logistic into (1e-4, 10); one linear layer whose output is its bias, (μ, u) = (0.3, u).
+#[test]
+fn the_transition_std_follows_its_form() {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let d = devices();
+    for (u, clamped_exp, logistic) in [
+        (
+            -7.0f64,
+            (-5.0f64).exp(),
+            1e-4 + (10.0 - 1e-4) / (1.0 + 7f64.exp()),
+        ),
+        (
+            0.5,
+            0.5f64.exp(),
+            1e-4 + (10.0 - 1e-4) / (1.0 + (-0.5f64).exp()),
+        ),
+        (
+            3.0,
+            2f64.exp(),
+            1e-4 + (10.0 - 1e-4) / (1.0 + (-3f64).exp()),
+        ),
+    ] {
+        for (form, expected) in [
+            (TransitionStd::ClampedExp, clamped_exp),
+            (TransitionStd::Logistic, logistic),
+        ] {
+            let mut h = Homomorphism::new((1, 1), (1, 1), &[4], &d.train)
+                .with_forms(ActionMap::Learned, form);
+            h.transition = Mlp {
+                layers: vec![StackedLinear {
+                    weight: Param::from_data([[[0.0f32, 0.0], [0.0, 0.0]]], &d.train),
+                    bias: Param::from_data([[0.3f32, u as f32]], &d.train),
+                }],
+            };
+            let (mean, std) = h
+                .valid()
+                .transition(m(&[1.0], 1, &d.plain), m(&[0.5], 1, &d.plain));
+            close(to_vec(mean)[0], 0.3, "μ");
+            close(
+                to_vec(std)[0],
+                expected,
+                &format!("σ at u = {u} ({form:?})"),
+            );
+        }
+    }
 }
 
 #[test]
@@ -209,12 +266,12 @@ fn lifting_loss_through_a_linear_action_map_matches_hand_values() {
     let d = devices();
     // x of one entry, one action: g_ω(x, a) = tanh(0.5·x + 1.0·a + 0.1), one linear layer.
     let mut h = Homomorphism::new((1, 1), (2, 1), &[4], &d.train);
-    h.action_map = Mlp {
+    h.action_map = Some(Mlp {
         layers: vec![StackedLinear {
             weight: Param::from_data([[[0.5f32], [1.0]]], &d.train),
             bias: Param::from_data([[0.1f32]], &d.train),
         }],
-    };
+    });
     // Two states x = (1, −1), K = 2 regular actions each: {0.2, 0.6} at the first, {−0.4, 0}
     // at the second, laid out sample by sample ([K, S, B, A], one run); the abstract policy's
     // {0.5, 0.5} and {0.1, −0.1}.
@@ -250,7 +307,10 @@ fn lifting_loss_through_a_linear_action_map_matches_hand_values() {
 
 fn config(lifting_weight: f64) -> D2hpgPrincipledConfig {
     D2hpgPrincipledConfig {
-        lifting_weight,
+        lifting: LiftingConfig {
+            lifting_weight,
+            ..LiftingConfig::default()
+        },
         latent_dim: 6,
         ..D2hpgPrincipledConfig::default()
     }
@@ -322,7 +382,7 @@ fn update_logs_l_lax_and_l_h_of_the_batch_it_was_given() {
             h.abstract_state(t.next_augmented.clone()),
             eps,
             (h.reward(state, action), t.reward.clone()),
-            transition_loss,
+            (transition_loss, config.transition_reduction),
         ))[0];
         let stats = update(&mut agent, &b);
         let logged = |name: &str| stats.iter().find(|(n, _)| *n == name).unwrap().1;
@@ -496,6 +556,136 @@ fn every_choice_changes_the_part_it_concerns() {
     assert!(
         stats.iter().any(|(n, v)| *n == "lifting_loss" && *v > 0.0),
         "{stats:?}"
+    );
+}
+
+/// Principled D2HPG under `--protocol authors` is the authors' `d2hpg_principled.py`: their
+/// settings through the registry, and an agent of them that is their algorithm — `ā = a` (no
+/// `g_ω`; the abstract policy acts in the task's bounds), `x̄` as wide as the observation, SAC
+/// on `x` as the regular learner, λ = 10 on its schedule, one α (the abstract learner's
+/// entropy terms read the regular learner's, and its own never moves).
+#[test]
+fn the_authors_principled_form_is_their_code() {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let fields = AlgoSettings::under(Protocol::Authors, "d2hpg-principled", &toml::Table::new())
+        .unwrap()
+        .fields();
+    let text = |v: &str| toml::Value::String(v.into());
+    for (field, value) in [
+        ("action_map", text("identity")),
+        ("latent_dim", toml::Value::Integer(0)),
+        ("metric_reduction", text("sum")),
+        ("distance", text("l1")),
+        ("stop_transition_gradient", toml::Value::Boolean(true)),
+        ("transition_loss", text("gaussian-nll")),
+        ("transition_reduction", text("mean")),
+        ("transition_std", text("clamped-exp")),
+        ("gradient_clip_norm", toml::Value::Float(10.0)),
+        ("abstract_reward", text("replay")),
+        ("regular_critic", text("augmented")),
+        ("shared_temperature", toml::Value::Boolean(true)),
+        ("lifting_weight", toml::Value::Float(10.0)),
+        ("lifting_schedule", text("hold-decay")),
+        ("lifting_samples", toml::Value::Integer(100)),
+        ("lifting_noise", text("independent")),
+        ("lifting_reduction", text("mean")),
+        ("network_init", text("orthogonal")),
+    ] {
+        assert_eq!(
+            fields[field], value,
+            "d2hpg-principled's {field} under the authors' protocol"
+        );
+    }
+    let authors: D2hpgPrincipledConfig = toml::Value::Table(fields).try_into().unwrap();
+    let (spec, d) = (spec(3), devices());
+    let mut agent = D2hpgPrincipled::new(&authors, &spec, &d, &[4]);
+    assert!(
+        agent.homomorphism.action_map.is_none(),
+        "g_ω is not the identity"
+    );
+    let b = random_batch(&spec, 32, 7);
+    let t = TransitionTensors::new(&b, &d.plain);
+    let h = agent.homomorphism.valid();
+    assert_eq!(
+        to_vec(h.abstract_action(t.augmented.clone(), t.action.clone())),
+        to_vec(t.action.clone()),
+        "ā is not a"
+    );
+    assert_eq!(
+        h.abstract_state(t.augmented.clone()).dims()[2],
+        spec.obs_dim,
+        "x̄ is not as wide as the observation"
+    );
+    // The abstract policy's actions lie in the task's bounds (the second dimension's ±2).
+    let abstract_actions = agent.abstract_learner.act_run(
+        0,
+        &vec![10.0; 64 * spec.obs_dim],
+        64,
+        spec.obs_dim,
+        ActMode::Explore,
+    );
+    assert!(
+        abstract_actions.chunks(2).any(|a| a[1].abs() > 1.0),
+        "{abstract_actions:?}"
+    );
+    // SAC on x: the regular critic reads the augmented state (wider than BPQL's on s).
+    let bpql = D2hpgPrincipled::new(&config(1.0), &spec, &d, &[4]);
+    assert!(
+        parameters(&agent.regular.critic).len() > parameters(&bpql.regular.critic).len(),
+        "the regular critic does not read x"
+    );
+    let abstract_alpha = parameters(&agent.abstract_learner.temperature);
+    for step in 0..4 {
+        let stats = update(&mut agent, &random_batch(&spec, 32, 20 + step));
+        let logged = |name: &str| stats.iter().find(|(n, _)| *n == name).unwrap().1;
+        assert_eq!(logged("lifting_weight"), 10.0);
+        assert_eq!(
+            logged("abstract_alpha"),
+            logged("alpha"),
+            "two temperatures"
+        );
+    }
+    assert_eq!(
+        parameters(&agent.abstract_learner.temperature),
+        abstract_alpha,
+        "the abstract learner tuned an α of its own"
+    );
+    assert_ne!(
+        parameters(&agent.regular.temperature),
+        abstract_alpha,
+        "the shared α was never tuned"
+    );
+}
+
+/// The homomorphism's gradient is clipped before its Adam step: at a norm far below Adam's ε
+/// the networks barely move, where unclipped they move by about the learning rate.
+#[test]
+fn the_homomorphism_gradient_is_clipped_as_configured() {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    let (spec, d) = (spec(3), devices());
+    let b = random_batch(&spec, 32, 11);
+    let moved = |gradient_clip_norm: f64| {
+        let config = D2hpgPrincipledConfig {
+            gradient_clip_norm,
+            ..config(1.0)
+        };
+        let mut agent = D2hpgPrincipled::new(&config, &spec, &d, &[6]);
+        let before = parameters(&agent.homomorphism);
+        update(&mut agent, &b);
+        let after = parameters(&agent.homomorphism);
+        before
+            .iter()
+            .zip(&after)
+            .map(|(u, v)| f64::from((u - v).abs()))
+            .fold(0.0, f64::max)
+    };
+    // Adam's first step is lr·g/(|g| + ε) per entry: about lr unclipped; with the whole
+    // gradient's norm at 1e-12, every |g| ≤ 1e-12 and the step at most lr·1e-12/ε.
+    let (free, clipped) = (moved(0.0), moved(1e-12));
+    assert!(free > 1e-4, "the unclipped step moved at most {free}");
+    assert!(
+        clipped < 0.01 * free,
+        "clipped at 1e-12 the step still moved {clipped} (free: {free})"
     );
 }
 

@@ -136,14 +136,17 @@ steps = 1000
         ("bpql", "inverted-pendulum", 910.0, false, "945.5"),
         ("d2hpg", "inverted-pendulum", 940.0, true, "949.8"),
     ] {
-        let row = format!("5,{algorithm},{task},3,{mean:.3},{std:.3},1000,{best},false,{paper},");
+        // The default protocol, run by dhrl itself.
+        let row = format!(
+            "5,{algorithm},dhrl,dhrl,{task},3,{mean:.3},{std:.3},1000,{best},false,{paper},"
+        );
         assert!(csv.contains(&row), "{row} not in\n{csv}");
     }
     let markdown = std::fs::read_to_string(out.join("table1.md")).unwrap();
     assert!(markdown.contains("**2040.0 ± 8.2 (3)**"), "{markdown}");
     assert!(
         markdown.contains(
-            "| 5 | BPQL | 2010.0 ± 8.2 (3) | 2136.3 ± 158 | 910.0 ± 8.2 (3) | 945.5 ± 20 |"
+            "| 5 | BPQL | dhrl | 2010.0 ± 8.2 (3) | 2136.3 ± 158 | 910.0 ± 8.2 (3) | 945.5 ± 20 |"
         ),
         "{markdown}"
     );
@@ -158,7 +161,7 @@ steps = 1000
     let aggregate = std::fs::read_to_string(out.join("aggregate.csv")).unwrap();
     assert!(
         aggregate.contains(
-            "probability_of_improvement,5,fixed,0,d2hpg,bpql,,1.000000,1.000000,1.000000"
+            "probability_of_improvement,5,fixed,0,d2hpg,dhrl,dhrl,bpql,dhrl,dhrl,,1.000000,1.000000,1.000000"
         ),
         "{aggregate}"
     );
@@ -166,7 +169,7 @@ steps = 1000
     // as a condition of its own.
     assert!(
         aggregate.contains(
-            "probability_of_improvement,5,fixed,0.05,d2hpg,bpql,,1.000000,1.000000,1.000000"
+            "probability_of_improvement,5,fixed,0.05,d2hpg,dhrl,dhrl,bpql,dhrl,dhrl,,1.000000,1.000000,1.000000"
         ),
         "{aggregate}"
     );
@@ -178,16 +181,16 @@ steps = 1000
     scores.sort_by(f64::total_cmp);
     let expected = scores[1..5].iter().sum::<f64>() / 4.0;
     assert!(
-        aggregate.contains(&format!("iqm,5,fixed,0,bpql,,6,{expected:.6},")),
+        aggregate.contains(&format!("iqm,5,fixed,0,bpql,dhrl,dhrl,,,,6,{expected:.6},")),
         "{expected:.6} in {aggregate}"
     );
 
     // Every evaluation of every run, long format.
     let returns = std::fs::read_to_string(out.join("returns.csv")).unwrap();
     assert_eq!(returns.lines().count(), 1 + 24 * 2);
-    assert!(
-        returns.starts_with("algorithm,task,delay,delay_kind,actuator_noise,seed,step,return\n")
-    );
+    assert!(returns.starts_with(
+        "algorithm,protocol,implementation,task,delay,delay_kind,actuator_noise,seed,step,return\n"
+    ));
 
     // The figures: curves per task × condition, noise, runtime; each SVG with its PNG.
     for name in [

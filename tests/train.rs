@@ -293,9 +293,8 @@ fn the_authors_schedule_follows_the_budget_and_survives_an_extension() {
     ] {
         assert!(saved.contains(line), "config.toml lacks `{line}`:\n{saved}");
     }
-    let number = |values: Vec<String>| -> Vec<f64> {
-        values.iter().map(|v| v.parse().unwrap()).collect()
-    };
+    let number =
+        |values: Vec<String>| -> Vec<f64> { values.iter().map(|v| v.parse().unwrap()).collect() };
     let expected = |step: f64| match step {
         s if s <= 250.0 => 10.0,
         s if s >= 750.0 => 0.0,
@@ -309,7 +308,11 @@ fn the_authors_schedule_follows_the_budget_and_survives_an_extension() {
             number(common::column(&train, "lifting_weight")),
         );
         let expected_rows = (last - steps[0]) / 50.0 + 1.0;
-        assert_eq!(steps.len() as f64, expected_rows, "a block every 50 steps: {steps:?}");
+        assert_eq!(
+            steps.len() as f64,
+            expected_rows,
+            "a block every 50 steps: {steps:?}"
+        );
         assert_eq!(steps[steps.len() - 1], last, "{steps:?}");
         for ((step, updates), weight) in steps.iter().zip(&updates).zip(&weights) {
             assert_eq!(step % 50.0, 0.0, "a block of updates at step {step}");
@@ -324,9 +327,18 @@ fn the_authors_schedule_follows_the_budget_and_survives_an_extension() {
     // Updates from step 100 once the replay holds 256 steps (each episode's Δ context steps
     // count too): the first block comes at a multiple of 50 between, the last at 1000.
     let first = check(1000.0);
-    assert!((150.0..=400.0).contains(&first), "the first block came at step {first}");
+    assert!(
+        (150.0..=400.0).contains(&first),
+        "the first block came at step {first}"
+    );
 
-    let extended = dhrl(&["train", "--resume", run.to_str().unwrap(), "--steps", "1500"]);
+    let extended = dhrl(&[
+        "train",
+        "--resume",
+        run.to_str().unwrap(),
+        "--steps",
+        "1500",
+    ]);
     let printed = String::from_utf8_lossy(&extended.stderr).to_string();
     ok(extended);
     assert!(
@@ -339,16 +351,18 @@ fn the_authors_schedule_follows_the_budget_and_survives_an_extension() {
 }
 
 /// `--protocol authors` is refused where it cannot apply, in one line that says why: with more
-/// than one copy, for principled D2HPG (whose authors' form dhrl lacks), and beside a config
-/// file that names the other protocol.
+/// than one copy (their loop steps one environment), and beside a config file that names the
+/// other protocol.
 #[test]
 fn the_authors_protocol_is_refused_where_it_cannot_apply() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("dhrl.toml");
     std::fs::write(&file, "protocol = \"dhrl\"\n").unwrap();
     for (extra, says) in [
-        (vec!["--algo", "d2hpg", "--envs", "4"], "1 under the authors' protocol"),
-        (vec!["--algo", "d2hpg-principled"], "cannot apply to d2hpg-principled"),
+        (
+            vec!["--algo", "d2hpg", "--envs", "4"],
+            "1 under the authors' protocol",
+        ),
         (
             vec!["--algo", "d2hpg", "--config", file.to_str().unwrap()],
             "where the file says protocol = \"dhrl\"",

@@ -272,12 +272,6 @@ pub enum AlgoError {
         accepted: &'static str,
         value: String,
     },
-    #[error("--protocol {protocol} cannot apply to {algo}: {why}")]
-    ProtocolUnsupported {
-        algo: &'static str,
-        protocol: Protocol,
-        why: &'static str,
-    },
     #[error("--set takes FIELD=VALUE (e.g. --set lifting_weight=10), got `{0}`")]
     BadAssignment(String),
     #[error(
@@ -333,10 +327,10 @@ pub trait AlgoConfig:
     fn build(&self, spec: &AgentSpec, devices: &Devices, seed: u64) -> Box<dyn Agent> {
         self.build_stack(spec, devices, &[seed])
     }
-    /// This algorithm's defaults under `protocol` ([`Protocol`]), or why the protocol cannot
-    /// apply to it. By default, its own defaults with the SAC settings the protocol sets
-    /// ([`SacConfig::protocol_defaults`]) in the fields it shares with SAC.
-    fn for_protocol(protocol: Protocol) -> Result<Self, AlgoError> {
+    /// This algorithm's defaults under `protocol` ([`Protocol`]). By default, its own defaults
+    /// with the SAC settings the protocol sets ([`SacConfig::protocol_defaults`]) in the fields
+    /// it shares with SAC.
+    fn for_protocol(protocol: Protocol) -> Self {
         let mut table = toml_table(&Self::default());
         let docs = Self::field_docs();
         table.extend(
@@ -344,9 +338,9 @@ pub trait AlgoConfig:
                 .into_iter()
                 .filter(|(field, _)| docs.iter().any(|doc| doc.name == field.as_str())),
         );
-        Ok(toml::Value::Table(table)
+        toml::Value::Table(table)
             .try_into()
-            .expect("SAC's fields read back into the configurations that embed them"))
+            .expect("SAC's fields read back into the configurations that embed them")
     }
     /// This configuration with what it schedules over the run's step budget (D2HPG's lifting
     /// weight under the `authors` protocol) fixed to `steps`, where it is not fixed yet: what
@@ -384,13 +378,14 @@ pub fn toml_value(value: &impl Serialize) -> toml::Value {
 
 /// Declares an algorithm's configuration struct from its documented fields and defaults:
 /// the struct (serde, every field defaulted), its `Default`, and its [`ConfigFields`]. A
-/// leading `..name: Type;` embeds another configuration's fields flat (D2HPG's SAC fields).
+/// leading `..name: Type;` embeds another configuration's fields flat (D2HPG's SAC and lifting
+/// fields).
 #[macro_export]
 macro_rules! algo_config {
     (
         $(#[$meta:meta])*
         pub struct $name:ident {
-            $( ..$base:ident : $base_ty:ty ; )?
+            $( ..$base:ident : $base_ty:ty ; )*
             $( $(#[doc = $doc:literal])* pub $field:ident : $ty:ty = $default:expr, )*
         }
     ) => {
@@ -398,14 +393,14 @@ macro_rules! algo_config {
         #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
         #[serde(default)]
         pub struct $name {
-            $( #[serde(flatten)] pub $base: $base_ty, )?
+            $( #[serde(flatten)] pub $base: $base_ty, )*
             $( $(#[doc = $doc])* pub $field: $ty, )*
         }
 
         impl Default for $name {
             fn default() -> Self {
                 Self {
-                    $( $base: <$base_ty>::default(), )?
+                    $( $base: <$base_ty>::default(), )*
                     $( $field: $default, )*
                 }
             }
@@ -415,7 +410,7 @@ macro_rules! algo_config {
             fn field_docs() -> Vec<$crate::algos::FieldDoc> {
                 #[allow(unused_mut)]
                 let mut docs: Vec<$crate::algos::FieldDoc> = Vec::new();
-                $( docs.extend(<$base_ty as $crate::algos::ConfigFields>::field_docs()); )?
+                $( docs.extend(<$base_ty as $crate::algos::ConfigFields>::field_docs()); )*
                 #[allow(unused_variables)]
                 let defaults = <Self as Default>::default();
                 $(

@@ -31,48 +31,27 @@ use burn::prelude::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use super::agent::{
-    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role, check,
+    ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role,
 };
 use super::bpql::bpql_learner;
 use super::context::UpdateContext;
+use super::lifting::{LiftingConfig, LiftingSchedule};
 use super::sac::{Config as SacConfig, SacBatch, SacLearner};
 use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
-    CheckpointDir, Devices, LearnError, Noise, TransitionTensors, lifting_loss, load_json_stack,
+    CheckpointDir, Devices, LearnError, Noise, TransitionTensors, load_json_stack,
     squashed_samples_k,
 };
 use crate::protocol::Protocol;
 use crate::seeds;
 
 crate::algo_config! {
-    /// D2HPG's configuration: SAC's, for both learners, and the lifting loss.
+    /// D2HPG's configuration: SAC's, for both learners, and the lifting loss's.
     pub struct Config {
         ..sac: SacConfig;
-        /// λ, the weight of L_lift in the regular actor's loss, and its largest value under a
-        /// schedule (1: ahead of the settings compared in docs/experiments.md on HalfCheetah at
-        /// Δ = 10, two seeds; the authors' code: 10).
-        pub lifting_weight: f64 = 1.0,
-        /// How λ moves over the run: "constant", or "hold-decay" (λ until `lifting_hold` of the
-        /// budget, then linearly to 0 at `lifting_decay_end`: the authors' code).
-        pub lifting_schedule: LiftingSchedule = LiftingSchedule::Constant,
-        /// Under "hold-decay", the fraction of the budget λ is held for.
-        pub lifting_hold: f64 = 0.25,
-        /// Under "hold-decay", the fraction of the budget at which λ reaches 0.
-        pub lifting_decay_end: f64 = 0.75,
-        /// Environment steps the schedule spans: 0 takes the run's `steps` when it starts and
-        /// records them, so a run extended on resume keeps its original schedule.
-        pub lifting_budget: u64 = 0,
-        /// K, samples per state for the means and standard deviations of L_lift (at least 2;
-        /// the authors' code: 100).
-        pub lifting_samples: usize = 2,
-        /// L_lift over action dimensions: "sum" (Eq. 4's squared norms) or "mean" (the authors'
-        /// `F.mse_loss`, 1/dim(A) of the sum).
-        pub lifting_reduction: LiftingReduction = LiftingReduction::Sum,
-        /// The two policies' K samples: "common" (the same ε for both, so that the moments
-        /// agree exactly when the distributions do) or "independent" (the authors' code).
-        pub lifting_noise: LiftingNoise = LiftingNoise::Common,
+        ..lifting: LiftingConfig;
         /// One α for both learners (the authors' code): the delay-free learner's entropy terms
         /// read the regular learner's α, which the regular policy's entropy tunes; false: each
         /// learner its own.
@@ -80,121 +59,21 @@ crate::algo_config! {
     }
 }
 
-/// How λ moves over a run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum LiftingSchedule {
-    Constant,
-    HoldDecay,
-}
-
-/// L_lift's reduction over action dimensions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum LiftingReduction {
-    Sum,
-    Mean,
-}
-
-/// Whether the two policies' lifting samples share their noise.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum LiftingNoise {
-    Common,
-    Independent,
-}
-
 impl Config {
     fn check(&self, algo: &'static str) -> Result<(), AlgoError> {
         self.sac.check(algo)?;
-        check_lifting(algo, self.lifting_weight, self.lifting_samples)?;
-        check(
-            (0.0..=1.0).contains(&self.lifting_hold)
-                && self.lifting_hold <= self.lifting_decay_end
-                && self.lifting_decay_end <= 1.0,
-            algo,
-            "lifting_hold and lifting_decay_end",
-            "fractions of the budget with 0 ≤ lifting_hold ≤ lifting_decay_end ≤ 1",
-            format!("{} and {}", self.lifting_hold, self.lifting_decay_end),
-        )
+        self.lifting.check(algo)
     }
 
-    /// D2HPG's defaults under `protocol`: the authors' code holds λ = 10 to a quarter of the
-    /// run and decays it to 0 at three quarters (`--update-type decay`, their default), with
-    /// K = 100 independent samples, the loss averaged over action dimensions and one α.
+    /// D2HPG's defaults under `protocol`: the authors' code adds to their lifting settings
+    /// ([`LiftingConfig::protocol_defaults`]) one α for both learners.
     pub fn protocol_defaults(protocol: Protocol) -> Config {
-        match protocol {
-            Protocol::Dhrl => Config::default(),
-            Protocol::Authors => Config {
-                sac: SacConfig::protocol_defaults(protocol),
-                lifting_weight: 10.0,
-                lifting_schedule: LiftingSchedule::HoldDecay,
-                lifting_samples: 100,
-                lifting_reduction: LiftingReduction::Mean,
-                lifting_noise: LiftingNoise::Independent,
-                shared_temperature: true,
-                ..Config::default()
-            },
-        }
-    }
-
-    /// λ at `env_steps` environment steps: constant, or under "hold-decay" λ while
-    /// `env_steps ≤ ⌊hold·budget⌋`, 0 from `⌊decay_end·budget⌋` on and linear between (the
-    /// authors' `lifting_coef`).
-    pub fn lifting_weight_at(&self, env_steps: u64) -> f64 {
-        if self.lifting_schedule == LiftingSchedule::Constant {
-            return self.lifting_weight;
-        }
-        let budget = self.lifting_budget as f64;
-        let (hold, end) = (
-            (budget * self.lifting_hold).floor(),
-            (budget * self.lifting_decay_end).floor(),
-        );
-        let step = env_steps as f64;
-        if step <= hold {
-            self.lifting_weight
-        } else if step >= end {
-            0.0
-        } else {
-            self.lifting_weight * (1.0 - (step - hold) / (end - hold))
-        }
-    }
-
-    /// [`AlgoConfig::for_budget`]: a "hold-decay" schedule not yet fixed spans `steps`.
-    pub fn with_budget(&self, steps: u64) -> Config {
-        let unfixed = self.lifting_schedule == LiftingSchedule::HoldDecay && self.lifting_budget == 0;
         Config {
-            lifting_budget: if unfixed { steps } else { self.lifting_budget },
-            ..self.clone()
+            sac: SacConfig::protocol_defaults(protocol),
+            lifting: LiftingConfig::protocol_defaults(protocol),
+            shared_temperature: protocol == Protocol::Authors,
         }
     }
-
-    /// [`AlgoConfig::budget`].
-    pub fn scheduled_budget(&self) -> Option<u64> {
-        (self.lifting_schedule == LiftingSchedule::HoldDecay).then_some(self.lifting_budget)
-    }
-}
-
-/// Checks λ and K, naming `algo` in the errors (principled D2HPG's lifting loss too).
-pub(super) fn check_lifting(
-    algo: &'static str,
-    lifting_weight: f64,
-    lifting_samples: usize,
-) -> Result<(), AlgoError> {
-    check(
-        lifting_weight >= 0.0 && lifting_weight.is_finite(),
-        algo,
-        "lifting_weight",
-        "a finite number ≥ 0",
-        lifting_weight,
-    )?;
-    check(
-        lifting_samples >= 2,
-        algo,
-        "lifting_samples",
-        "at least 2 (standard deviations need two samples)",
-        lifting_samples,
-    )
 }
 
 /// What both variants declare, but for their names.
@@ -220,16 +99,19 @@ impl AlgoConfig for Config {
         self.check(Self::INFO.name)
     }
 
-    fn for_protocol(protocol: Protocol) -> Result<Config, AlgoError> {
-        Ok(Config::protocol_defaults(protocol))
+    fn for_protocol(protocol: Protocol) -> Config {
+        Config::protocol_defaults(protocol)
     }
 
     fn for_budget(&self, steps: u64) -> Config {
-        self.with_budget(steps)
+        Config {
+            lifting: self.lifting.with_budget(steps),
+            ..self.clone()
+        }
     }
 
     fn budget(&self) -> Option<u64> {
-        self.scheduled_budget()
+        self.lifting.scheduled_budget()
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -263,28 +145,30 @@ impl AlgoConfig for NaiveConfig {
 
     /// The authors' `d2hpg_naive.py`: λ = 10 without a schedule, K = 100 independent samples
     /// averaged over action dimensions, and the delay-free SAC's α never tuned (0.2).
-    fn for_protocol(protocol: Protocol) -> Result<NaiveConfig, AlgoError> {
-        let authors = Config::protocol_defaults(protocol);
-        Ok(NaiveConfig(match protocol {
-            Protocol::Dhrl => authors,
+    fn for_protocol(protocol: Protocol) -> NaiveConfig {
+        let defaults = Config::protocol_defaults(protocol);
+        NaiveConfig(match protocol {
+            Protocol::Dhrl => defaults,
             Protocol::Authors => Config {
                 sac: SacConfig {
                     autotune_alpha: false,
-                    ..authors.sac
+                    ..defaults.sac
                 },
-                lifting_schedule: LiftingSchedule::Constant,
+                lifting: LiftingConfig {
+                    lifting_schedule: LiftingSchedule::Constant,
+                    ..defaults.lifting
+                },
                 shared_temperature: false,
-                ..authors
             },
-        }))
+        })
     }
 
     fn for_budget(&self, steps: u64) -> NaiveConfig {
-        NaiveConfig(self.0.with_budget(steps))
+        NaiveConfig(self.0.for_budget(steps))
     }
 
     fn budget(&self) -> Option<u64> {
-        self.0.scheduled_budget()
+        self.0.budget()
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -428,7 +312,7 @@ impl Agent for D2hpg {
     fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         let plain = self.regular.devices.plain.clone();
         // The runs of a stack share one schedule: λ at this update's step.
-        let lifting_weight = self.config.lifting_weight_at(contexts[0].env_steps);
+        let lifting_weight = self.config.lifting.weight_at(contexts[0].env_steps);
         let t = TransitionTensors::stacked(&UpdateContext::batches(contexts)?, &plain);
         let state = (t.state.clone(), t.next_state.clone());
         let augmented = (t.augmented.clone(), t.next_augmented.clone());
@@ -439,11 +323,7 @@ impl Agent for D2hpg {
         };
         // The delay-free learner: actor and critics on the true state.
         let free_batch = SacBatch::new(&t, state.clone(), state);
-        let (rows, k, act) = (
-            regular_batch.rows(),
-            self.config.lifting_samples,
-            self.spec.act_dim,
-        );
+        let (rows, act) = (regular_batch.rows(), self.spec.act_dim);
         let with_critic = self.regular_kind.has_critic();
         let (regular, delay_free) = (&mut self.regular, &mut self.delay_free);
         // One α (the authors' code): the delay-free learner reads the regular learner's, as it
@@ -482,13 +362,10 @@ impl Agent for D2hpg {
         //    under "common" noise (the two sets of moments are then equal exactly when the two
         //    distributions are) and draw their own under "independent". L_lift (Eq. 4) is
         //    logged unweighted, per run, in the configured reduction.
-        let free_eps = Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, act, &plain);
-        let regular_eps = match self.config.lifting_noise {
-            LiftingNoise::Common => free_eps.clone(),
-            LiftingNoise::Independent => {
-                Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, act, &plain)
-            }
-        };
+        let (free_eps, regular_eps) =
+            self.config
+                .lifting
+                .draws(&mut self.lifting_noise, rows, (act, act), &plain);
         let (free_mean, free_log_std) = free_distribution.clone();
         let free_actions = squashed_samples_k(
             (free_mean.inner(), free_log_std.inner()),
@@ -497,12 +374,7 @@ impl Agent for D2hpg {
         );
         let regular_actions =
             squashed_samples_k(regular_distribution.clone(), regular_eps, &regular.scale);
-        let lifting = match self.config.lifting_reduction {
-            LiftingReduction::Sum => lifting_loss(regular_actions, free_actions),
-            LiftingReduction::Mean => {
-                lifting_loss(regular_actions, free_actions).div_scalar(act as f64)
-            }
-        };
+        let lifting = self.config.lifting.loss(regular_actions, free_actions);
         let lifting_values = lifting.clone().inner();
         let lift = lifting.mul_scalar(lifting_weight).sum();
 

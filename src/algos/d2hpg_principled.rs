@@ -45,6 +45,12 @@
 //! 313 ± 251, population std over 3 seeds), level with D2HPG and BPQL, while Huber's
 //! distance, the held transition and λ ∈ {0.1, 0.01} separated nothing from the paper's forms
 //! (docs/experiments.md, "Principled D2HPG: the settings").
+//!
+//! Under `--protocol authors` every field takes the value of the authors' released
+//! `d2hpg_principled.py` ([`Config::authors`]): `g` the identity, `f` to the observation's
+//! width, L_lax summed with its target detached, the NLL averaged over dimensions with a
+//! clamped-exponential σ, the homomorphism's gradient norm clipped at 10, the abstract critic
+//! on the replay reward, SAC on `x` as the regular learner, λ on their schedule and one α.
 use std::ops::Range;
 use std::path::Path;
 
@@ -56,16 +62,17 @@ use serde::{Deserialize, Serialize};
 
 use super::agent::{ActMode, Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, Role, check};
 use super::context::UpdateContext;
-use super::d2hpg::check_lifting;
-use crate::protocol::Protocol;
+use super::lifting::{LiftingConfig, Reduction};
 use super::sac::{Config as SacConfig, SacBatch, SacLearner};
 use super::stats::Stats;
 use crate::acting::{ActingNetwork, PolicyInput};
 use crate::delay::ReplayError;
 use crate::learn::{
     CheckpointDir, Devices, LearnError, Mlp, MlpConfig, Noise, TransitionTensors, adam, batch_mean,
-    lifting_loss, load_json_stack, load_optimizer_stack, load_stack, squashed_samples_k, stack,
+    clip_norm_per_run, initialise, load_json_stack, load_optimizer_stack, load_stack,
+    squashed_samples_k, stack,
 };
+use crate::protocol::Protocol;
 use crate::seeds;
 
 /// How the lax-bisimulation metric reduces over the latent dimensions.
@@ -104,6 +111,26 @@ pub enum TransitionLoss {
     SampleSquared,
 }
 
+/// The action map `g_ω` of the homomorphism.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ActionMap {
+    /// A learned `g_ω(x, a) ∈ (−1, 1)^Ā` (the paper's).
+    Learned,
+    /// `ā = a` (the authors' code): the abstract actions are the task's, in its bounds.
+    Identity,
+}
+
+/// How `P̄_τ` reaches its standard deviation from its network's output `u`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TransitionStd {
+    /// `σ = 1e-4 + (10 − 1e-4)·logistic(u)` (HPG's bounds, a gradient everywhere).
+    Logistic,
+    /// `σ = exp(clamp(u, −5, 2))` (the authors' code).
+    ClampedExp,
+}
+
 /// What the regular critic `Q_φ1` conditions on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -126,12 +153,17 @@ pub enum AbstractReward {
 
 crate::algo_config! {
     /// Principled D2HPG's configuration: SAC's (for the regular and the abstract learner, and
-    /// the homomorphism's Adam), the homomorphism's and the lifting loss's.
+    /// the homomorphism's Adam), the lifting loss's and the homomorphism's.
     pub struct Config {
         ..sac: SacConfig;
-        /// Width of the abstract state `x̄ = f_ξ(x)`.
+        ..lifting: LiftingConfig;
+        /// Width of the abstract state `x̄ = f_ξ(x)`; 0 for the task's observation width (the
+        /// authors' code).
         pub latent_dim: usize = 50,
-        /// Width of the abstract action `ā = g_ω(x, a)`; 0 for the task's action dimension.
+        /// The action map: "learned" (`g_ω`) or "identity" (`ā = a`, the authors' code).
+        pub action_map: ActionMap = ActionMap::Learned,
+        /// Width of the abstract action `ā = g_ω(x, a)`; 0 for the task's action dimension
+        /// (the only width "identity" takes).
         pub abstract_action_dim: usize = 0,
         /// Hidden layer widths of `f_ξ`, `g_ω`, `P̄_τ` and `R̄_ν` (ReLU MLPs).
         pub homomorphism_hidden: Vec<usize> = vec![256, 256],
@@ -142,25 +174,60 @@ crate::algo_config! {
         pub metric_reduction: MetricReduction = MetricReduction::Mean,
         /// The distance of abstract states and rewards in L_lax: "l1" (Eq. 2) or "huber".
         pub distance: Distance = Distance::L1,
-        /// Hold the abstract transition's μ and σ fixed inside L_lax's target (HPG's code):
-        /// L_lax then moves `f_ξ` through the state distance only, and `g_ω` not at all. False:
-        /// L_lax's gradient reaches `P̄_τ` and, through its inputs, `f_ξ` and `g_ω` (the
-        /// Algorithm's line 23 trains them all on L_lax + L_h; Eq. 2 names ξ and ω).
+        /// Hold the abstract transition's μ and σ fixed inside L_lax's target (HPG's code and
+        /// the authors'): L_lax then moves `f_ξ` through the state distance only, and `g_ω` not
+        /// at all. False: L_lax's gradient reaches `P̄_τ` and, through its inputs, `f_ξ` and
+        /// `g_ω` (the Algorithm's line 23 trains them all on L_lax + L_h; Eq. 2 names ξ and ω).
         pub stop_transition_gradient: bool = false,
         /// L_h's transition term: "gaussian-nll" or "sample-squared" (Eq. 3 as written, which
         /// drives σ to its floor).
         pub transition_loss: TransitionLoss = TransitionLoss::GaussianNll,
+        /// The transition term over latent dimensions: "sum" or "mean" (the authors' code).
+        pub transition_reduction: Reduction = Reduction::Sum,
+        /// `P̄_τ`'s standard deviation: "logistic" or "clamped-exp" (the authors' code).
+        pub transition_std: TransitionStd = TransitionStd::Logistic,
+        /// Each run's gradient norm over the homomorphism's networks is clipped to this before
+        /// its Adam step (PyTorch's `clip_grad_norm_`; the authors' code: 10); 0: no clipping.
+        pub gradient_clip_norm: f64 = 0.0,
         /// The abstract critic's reward: "model" (R̄_ν, as written) or "replay" (r̃).
         pub abstract_reward: AbstractReward = AbstractReward::Model,
         /// The regular critic's input: "true-state" (BPQL's beta critic) or "augmented" (x).
         pub regular_critic: RegularCritic = RegularCritic::TrueState,
-        /// Train the regular policy by BPQL's actor step besides L_lift (the Algorithm's
-        /// optional line 25); false: by λ·L_lift alone.
+        /// Train the regular policy by its actor step besides L_lift (the Algorithm's optional
+        /// line 25); false: by λ·L_lift alone.
         pub regular_policy_step: bool = true,
-        /// λ, the weight of L_lift in the regular policy's loss.
-        pub lifting_weight: f64 = 1.0,
-        /// K, samples per state for L_lift's means and standard deviations (at least 2).
-        pub lifting_samples: usize = 2,
+        /// One α for both learners (the authors' code): the abstract learner's entropy terms
+        /// read the regular learner's α, which the regular policy's entropy tunes.
+        pub shared_temperature: bool = false,
+    }
+}
+
+impl Config {
+    /// The authors' `d2hpg_principled.py` in its default `controlled` mode: `g` the identity,
+    /// `f` to the observation's width, L_lax summed over dimensions with a detached target,
+    /// the Gaussian NLL averaged over dimensions with `σ = exp(clamp(·, −5, 2))`, the
+    /// homomorphism's gradient norm clipped at 10, the abstract critic on the replay reward,
+    /// SAC on `x` as the regular learner, their lifting settings and one α.
+    pub fn authors() -> Config {
+        let protocol = Protocol::Authors;
+        Config {
+            sac: SacConfig::protocol_defaults(protocol),
+            lifting: LiftingConfig::protocol_defaults(protocol),
+            latent_dim: 0,
+            action_map: ActionMap::Identity,
+            metric_reduction: MetricReduction::Sum,
+            distance: Distance::L1,
+            stop_transition_gradient: true,
+            transition_loss: TransitionLoss::GaussianNll,
+            transition_reduction: Reduction::Mean,
+            transition_std: TransitionStd::ClampedExp,
+            gradient_clip_norm: 10.0,
+            abstract_reward: AbstractReward::Replay,
+            regular_critic: RegularCritic::Augmented,
+            regular_policy_step: true,
+            shared_temperature: true,
+            ..Config::default()
+        }
     }
 }
 
@@ -186,28 +253,40 @@ impl AlgoConfig for Config {
         ],
     };
 
-    fn for_protocol(protocol: Protocol) -> Result<Config, AlgoError> {
+    fn for_protocol(protocol: Protocol) -> Config {
         match protocol {
-            Protocol::Dhrl => Ok(Config::default()),
-            Protocol::Authors => Err(AlgoError::ProtocolUnsupported {
-                algo: Self::INFO.name,
-                protocol,
-                why: "the authors' principled form (g the identity, L_lax summed with a detached \
-                      target, the mean NLL, gradient clipping, SAC on x as the regular learner) \
-                      is not built yet; its nearest settings are in docs/DESIGN.md §3.4",
-            }),
+            Protocol::Dhrl => Config::default(),
+            Protocol::Authors => Config::authors(),
         }
+    }
+
+    fn for_budget(&self, steps: u64) -> Config {
+        Config {
+            lifting: self.lifting.with_budget(steps),
+            ..self.clone()
+        }
+    }
+
+    fn budget(&self) -> Option<u64> {
+        self.lifting.scheduled_budget()
     }
 
     fn validate(&self) -> Result<(), AlgoError> {
         let algo = Self::INFO.name;
         self.sac.check(algo)?;
         check(
-            self.latent_dim > 0,
+            self.action_map == ActionMap::Learned || self.abstract_action_dim == 0,
             algo,
-            "latent_dim",
-            "a positive width",
-            self.latent_dim,
+            "abstract_action_dim",
+            "0 (the task's action width) under action_map = \"identity\"",
+            self.abstract_action_dim,
+        )?;
+        check(
+            self.gradient_clip_norm >= 0.0 && self.gradient_clip_norm.is_finite(),
+            algo,
+            "gradient_clip_norm",
+            "a finite number ≥ 0 (0: no clipping)",
+            self.gradient_clip_norm,
         )?;
         check(
             !self.homomorphism_hidden.contains(&0),
@@ -223,7 +302,7 @@ impl AlgoConfig for Config {
             "a finite number ≥ 0",
             self.lax_weight,
         )?;
-        check_lifting(algo, self.lifting_weight, self.lifting_samples)
+        self.lifting.check(algo)
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
@@ -235,6 +314,10 @@ impl AlgoConfig for Config {
 /// a logistic so that its gradient never vanishes at a clamp.
 const SIGMA_MIN: f64 = 1e-4;
 const SIGMA_MAX: f64 = 10.0;
+/// Under [`TransitionStd::ClampedExp`], `ln σ` lies in [LOG_SIGMA_MIN, LOG_SIGMA_MAX] (the
+/// authors' `--transition-log-std-bound`).
+const LOG_SIGMA_MIN: f64 = -5.0;
+const LOG_SIGMA_MAX: f64 = 2.0;
 /// Inside W₂'s square root, so that it stays differentiable where two Gaussians coincide.
 const W2_FLOOR: f64 = 1e-12;
 
@@ -244,18 +327,20 @@ const W2_FLOOR: f64 = 1e-12;
 pub struct Homomorphism {
     /// `f_ξ: x → x̄`.
     pub state_map: Mlp,
-    /// `g_ω: (x, a) → ā` before its tanh.
-    pub action_map: Mlp,
-    /// `P̄_τ: (x̄, ā) → (μ, σ)` before σ's logistic.
+    /// `g_ω: (x, a) → ā` before its tanh; `None` for the identity.
+    pub action_map: Option<Mlp>,
+    /// `P̄_τ: (x̄, ā) → (μ, u)`, σ from `u` as `transition_std` says.
     pub transition: Mlp,
     /// `R̄_ν: (x̄, ā) → r̄`.
     pub reward: Mlp,
+    #[module(skip)]
+    pub transition_std: TransitionStd,
 }
 
 impl Homomorphism {
     /// One run's four networks for augmented states of width `x_dim` and actions of
     /// `act_dim`, with abstract states of `latent` and abstract actions of `abstract_act`
-    /// entries.
+    /// entries: a learned `g_ω` and a logistic σ ([`Homomorphism::with_forms`] changes them).
     pub fn new(
         (x_dim, act_dim): (usize, usize),
         (latent, abstract_act): (usize, usize),
@@ -264,9 +349,22 @@ impl Homomorphism {
     ) -> Homomorphism {
         Homomorphism {
             state_map: MlpConfig::new(x_dim, hidden, latent).init(device),
-            action_map: MlpConfig::new(x_dim + act_dim, hidden, abstract_act).init(device),
+            action_map: Some(MlpConfig::new(x_dim + act_dim, hidden, abstract_act).init(device)),
             transition: MlpConfig::new(latent + abstract_act, hidden, 2 * latent).init(device),
             reward: MlpConfig::new(latent + abstract_act, hidden, 1).init(device),
+            transition_std: TransitionStd::Logistic,
+        }
+    }
+
+    /// This homomorphism with the action map and the transition's σ of those forms.
+    pub fn with_forms(self, action_map: ActionMap, transition_std: TransitionStd) -> Homomorphism {
+        Homomorphism {
+            action_map: match action_map {
+                ActionMap::Learned => self.action_map,
+                ActionMap::Identity => None,
+            },
+            transition_std,
+            ..self
         }
     }
 
@@ -275,11 +373,12 @@ impl Homomorphism {
         self.state_map.forward(augmented)
     }
 
-    /// `ā = g_ω(x, a) ∈ (−1, 1)`, `[S, B, Ā]`.
+    /// `ā = g_ω(x, a) ∈ (−1, 1)`, or `a` itself under the identity, `[S, B, Ā]`.
     pub fn abstract_action(&self, augmented: Tensor<3>, action: Tensor<3>) -> Tensor<3> {
-        self.action_map
-            .forward(Tensor::cat(vec![augmented, action], 2))
-            .tanh()
+        match &self.action_map {
+            Some(map) => map.forward(Tensor::cat(vec![augmented, action], 2)).tanh(),
+            None => action,
+        }
     }
 
     /// The mean and standard deviation of `P̄_τ(·|x̄, ā)`, each `[S, B, latent]`.
@@ -287,9 +386,13 @@ impl Homomorphism {
         let out = self.transition.forward(Tensor::cat(vec![state, action], 2));
         let latent = out.dims()[2] / 2;
         let mean = out.clone().narrow(2, 0, latent);
-        let std = sigmoid(out.narrow(2, latent, latent))
-            .mul_scalar(SIGMA_MAX - SIGMA_MIN)
-            .add_scalar(SIGMA_MIN);
+        let raw = out.narrow(2, latent, latent);
+        let std = match self.transition_std {
+            TransitionStd::Logistic => sigmoid(raw)
+                .mul_scalar(SIGMA_MAX - SIGMA_MIN)
+                .add_scalar(SIGMA_MIN),
+            TransitionStd::ClampedExp => raw.clamp(LOG_SIGMA_MIN, LOG_SIGMA_MAX).exp(),
+        };
         (mean, std)
     }
 
@@ -301,6 +404,9 @@ impl Homomorphism {
     /// `g_ω(x, a)` of K actions per state, `[K, S, B, Ā]` from `x` `[S, B, X]` and `a`
     /// `[K, S, B, A]`: each run maps its K·B rows, sample after sample, in one product.
     pub fn abstract_actions_k(&self, augmented: Tensor<3>, actions: Tensor<4>) -> Tensor<4> {
+        if self.action_map.is_none() {
+            return actions;
+        }
         let [k, runs, rows, act] = actions.dims();
         let width = augmented.dims()[2];
         let repeated =
@@ -413,15 +519,15 @@ pub fn lax_loss(
 }
 
 /// L_h (Eq. 3): the abstract transition's fit to the encoded next state `f(x')` (a fixed
-/// target), summed over the latent dimensions, plus the abstract reward's `(r̄⁺ − r̃)²`,
-/// averaged over each run's batch, `[S]`. `eps` `[S, B, latent]` draws the sample of
-/// `SampleSquared`.
+/// target), summed or averaged over the latent dimensions, plus the abstract reward's
+/// `(r̄⁺ − r̃)²`, averaged over each run's batch, `[S]`. `eps` `[S, B, latent]` draws the
+/// sample of `SampleSquared`.
 pub fn abstract_model_loss(
     (mean, std): (Tensor<3>, Tensor<3>),
     next_abstract_state: Tensor<3>,
     eps: Tensor<3>,
     (predicted_reward, reward): (Tensor<3>, Tensor<3>),
-    form: TransitionLoss,
+    (form, reduction): (TransitionLoss, Reduction),
 ) -> Tensor<1> {
     let transition = match form {
         TransitionLoss::GaussianNll => {
@@ -432,7 +538,11 @@ pub fn abstract_model_loss(
         }
         TransitionLoss::SampleSquared => (mean + std * eps - next_abstract_state).square(),
     };
-    batch_mean(transition.sum_dim(2) + (predicted_reward - reward).square())
+    let transition = match reduction {
+        Reduction::Sum => transition.sum_dim(2),
+        Reduction::Mean => transition.mean_dim(2),
+    };
+    batch_mean(transition + (predicted_reward - reward).square())
 }
 
 /// `train.csv` columns.
@@ -444,7 +554,8 @@ const ABSTRACT_STATS: [&str; 3] = [
 ];
 const CRITIC_STATS: [&str; 2] = ["critic_loss", "alpha"];
 const ACTOR_STAT: &str = "actor_loss";
-const LIFTING_STAT: &str = "lifting_loss";
+/// The unweighted lifting loss and its weight λ at the update.
+const LIFTING_STATS: [&str; 2] = ["lifting_loss", "lifting_weight"];
 
 /// Principled D2HPG for a stack of runs (a solo run is S = 1).
 pub struct D2hpgPrincipled {
@@ -476,16 +587,25 @@ impl D2hpgPrincipled {
             RegularCritic::TrueState => spec.obs_dim,
             RegularCritic::Augmented => spec.augmented_dim(),
         };
+        let latent = match config.latent_dim {
+            0 => spec.obs_dim,
+            width => width,
+        };
         let abstract_act = match config.abstract_action_dim {
             0 => spec.act_dim,
             width => width,
         };
+        // Under the identity the abstract actions are the task's, in its bounds.
+        let (action_low, action_high) = match config.action_map {
+            ActionMap::Learned => (vec![-1.0; abstract_act], vec![1.0; abstract_act]),
+            ActionMap::Identity => (spec.action_low.clone(), spec.action_high.clone()),
+        };
         let abstract_spec = AgentSpec {
-            obs_dim: config.latent_dim,
+            obs_dim: latent,
             act_dim: abstract_act,
             delay: 0,
-            action_low: vec![-1.0; abstract_act],
-            action_high: vec![1.0; abstract_act],
+            action_low,
+            action_high,
         };
         let named = |name: &str| -> Vec<u64> {
             seeds.iter().map(|&seed| seeds::named(seed, name)).collect()
@@ -509,12 +629,14 @@ impl D2hpgPrincipled {
                 .into_iter()
                 .map(|seed| {
                     devices.train.seed(seed);
-                    Homomorphism::new(
+                    let h = Homomorphism::new(
                         (spec.augmented_dim(), spec.act_dim),
-                        (config.latent_dim, abstract_act),
+                        (latent, abstract_act),
                         &config.homomorphism_hidden,
                         &devices.train,
                     )
+                    .with_forms(config.action_map, config.transition_std);
+                    initialise(h, config.sac.network_init, seeds::named(seed, "init"))
                 })
                 .collect(),
         );
@@ -544,7 +666,8 @@ impl D2hpgPrincipled {
             .iter_mut()
             .map(|noise| 1 + noise.below(rows.max(2) - 1))
             .collect();
-        let eps = Noise::stacked_normal(&mut self.model_noise, rows, self.config.latent_dim, plain);
+        let latent = self.abstract_spec.obs_dim;
+        let eps = Noise::stacked_normal(&mut self.model_noise, rows, latent, plain);
         let h = &self.homomorphism;
         let state = h.abstract_state(t.augmented.clone());
         let action = h.abstract_action(t.augmented.clone(), t.action.clone());
@@ -564,11 +687,21 @@ impl D2hpgPrincipled {
             next_state,
             eps,
             (predicted_reward, t.reward.clone()),
-            self.config.transition_loss,
+            (
+                self.config.transition_loss,
+                self.config.transition_reduction,
+            ),
         );
         let values = (lax.clone().inner(), model.clone().inner());
         let loss = (lax.mul_scalar(self.config.lax_weight) + model).sum();
-        let grads = GradientsParams::from_grads(loss.backward(), &self.homomorphism);
+        let mut grads = GradientsParams::from_grads(loss.backward(), &self.homomorphism);
+        if self.config.gradient_clip_norm > 0.0 {
+            clip_norm_per_run(
+                &mut grads,
+                &self.homomorphism,
+                self.config.gradient_clip_norm,
+            );
+        }
         self.homomorphism = self.homomorphism_opt.step(
             self.config.sac.learning_rate,
             self.homomorphism.clone(),
@@ -641,13 +774,15 @@ impl Agent for D2hpgPrincipled {
             .chain(&ABSTRACT_STATS)
             .chain(&CRITIC_STATS)
             .chain(actor)
-            .chain(&[LIFTING_STAT])
+            .chain(&LIFTING_STATS)
             .copied()
             .collect()
     }
 
     fn update_runs(&mut self, contexts: &mut [UpdateContext<'_>]) -> Result<Stats, ReplayError> {
         let plain = self.regular.devices.plain.clone();
+        // The runs of a stack share one schedule: λ at this update's step.
+        let lifting_weight = self.config.lifting.weight_at(contexts[0].env_steps);
         let t = TransitionTensors::stacked(&UpdateContext::batches(contexts)?, &plain);
         // 22–23. The homomorphism and the abstract model.
         let (lax, model) = self.update_homomorphism(&t);
@@ -661,13 +796,19 @@ impl Agent for D2hpgPrincipled {
             (t.augmented.clone(), t.next_augmented.clone()),
             critic_input,
         );
-        let (rows, k) = (regular_batch.rows(), self.config.lifting_samples);
+        let rows = regular_batch.rows();
         let (act, abstract_act) = (self.spec.act_dim, self.abstract_spec.act_dim);
         let (regular, abstract_learner) = (&mut self.regular, &mut self.abstract_learner);
-        let (alphas, abstract_alphas) = (
-            regular.temperature.alpha_values(),
-            abstract_learner.temperature.alpha_values(),
-        );
+        // One α (the authors' code): the abstract learner reads the regular learner's, as it
+        // stands before this update's temperature step.
+        let shared_temperature = self.config.shared_temperature;
+        abstract_learner.borrowed_alpha =
+            shared_temperature.then(|| regular.temperature.alpha_tensor());
+        let alphas = regular.temperature.alpha_values();
+        let abstract_alphas = match shared_temperature {
+            true => alphas.clone(),
+            false => abstract_learner.temperature.alpha_values(),
+        };
 
         // 24. Both critics, and both policies' distributions before either policy moves. The
         //     learners share no parameters and draw from their own noise streams, so rayon
@@ -687,15 +828,14 @@ impl Agent for D2hpgPrincipled {
         );
         regular.devices.settle();
 
-        // 27. L_lift (Eq. 4): the regular policy's K actions at x, mapped by g_ω, against the
-        //     abstract policy's K actions at x̄ = f(x), held fixed. With Ā = A both sides share
-        //     ε (common random numbers, as `d2hpg`). Logged unweighted, per run.
-        let eps = Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, act, &plain);
-        let abstract_eps = if abstract_act == act {
-            eps.clone()
-        } else {
-            Noise::stacked_normal_k(&mut self.lifting_noise, k, rows, abstract_act, &plain)
-        };
+        // 27. L_lift (Eq. 4): the regular policy's K actions at x, mapped by g_ω (or as they
+        //     are under the identity), against the abstract policy's K actions at x̄ = f(x),
+        //     held fixed; common or independent noise where Ā = A, independent otherwise.
+        //     Logged unweighted, per run.
+        let (abstract_eps, eps) =
+            self.config
+                .lifting
+                .draws(&mut self.lifting_noise, rows, (abstract_act, act), &plain);
         let (abstract_mean, abstract_log_std) = abstract_distribution.clone();
         let abstract_actions = squashed_samples_k(
             (abstract_mean.inner(), abstract_log_std.inner()),
@@ -706,9 +846,9 @@ impl Agent for D2hpgPrincipled {
         let lifted = self
             .homomorphism
             .abstract_actions_k(t.augmented.clone(), regular_actions);
-        let lifting = lifting_loss(lifted, abstract_actions);
+        let lifting = self.config.lifting.loss(lifted, abstract_actions);
         let lifting_values = lifting.clone().inner();
-        let weighted_lifting = lifting.mul_scalar(self.config.lifting_weight).sum();
+        let weighted_lifting = lifting.mul_scalar(lifting_weight).sum();
 
         // 25–26, 28. The policies side by side: the regular one by BPQL's actor step with
         //     λ·L_lift in its loss (or λ·L_lift alone), the abstract one by SAC's actor step on
@@ -734,6 +874,7 @@ impl Agent for D2hpgPrincipled {
         );
 
         let mut stats = Stats::new();
+        let runs = lifting_values.dims()[0];
         let named = MODEL_STATS
             .into_iter()
             .zip([lax, model])
@@ -744,7 +885,13 @@ impl Agent for D2hpgPrincipled {
             ]))
             .chain(CRITIC_STATS.into_iter().zip([critic_losses, alphas]))
             .chain(actor_losses.map(|losses| (ACTOR_STAT, losses)))
-            .chain([(LIFTING_STAT, lifting_values)]);
+            .chain([
+                (LIFTING_STATS[0], lifting_values),
+                (
+                    LIFTING_STATS[1],
+                    Tensor::full([runs], lifting_weight, &plain),
+                ),
+            ]);
         for (name, values) in named {
             stats.push(name, values);
         }

@@ -7,7 +7,9 @@
 //! [`D2hpg`] runs it.
 use serde::{Deserialize, Serialize};
 
-use super::agent::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role};
+use super::agent::{
+    Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, ConfigFields, FieldDoc, Role,
+};
 use super::d2hpg::{Config as D2hpgConfig, D2HPG_INFO, D2hpg, Regular};
 use crate::learn::Devices;
 use crate::protocol::Protocol;
@@ -37,19 +39,25 @@ impl AlgoConfig for Config {
         <D2hpgConfig as AlgoConfig>::validate(&self.0)
     }
 
-    fn for_protocol(protocol: Protocol) -> Result<Config, AlgoError> {
-        Ok(Config(D2hpgConfig::protocol_defaults(protocol)))
+    fn for_protocol(protocol: Protocol) -> Config {
+        Config(D2hpgConfig::protocol_defaults(protocol))
     }
 
     fn for_budget(&self, steps: u64) -> Config {
-        Config(self.0.with_budget(steps))
+        Config(self.0.for_budget(steps))
     }
 
     fn budget(&self) -> Option<u64> {
-        self.0.scheduled_budget()
+        self.0.budget()
     }
 
     fn build_stack(&self, spec: &AgentSpec, devices: &Devices, seeds: &[u64]) -> Box<dyn Agent> {
-        Box::new(D2hpg::new(Regular::AugmentedSac, &self.0, spec, devices, seeds))
+        Box::new(D2hpg::new(
+            Regular::AugmentedSac,
+            &self.0,
+            spec,
+            devices,
+            seeds,
+        ))
     }
 }

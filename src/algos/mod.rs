@@ -15,6 +15,7 @@ mod d2hpg_principled;
 mod d2hpg_sac;
 mod delayed_sac;
 mod independent;
+mod lifting;
 mod naive_sac;
 mod registry;
 mod sac;
@@ -28,14 +29,13 @@ pub use agent::{
 };
 pub use bpql::Bpql;
 pub use context::UpdateContext;
-pub use d2hpg::{
-    Config as D2hpgConfig, D2hpg, LiftingNoise, LiftingReduction, LiftingSchedule, Regular,
-};
+pub use d2hpg::{Config as D2hpgConfig, D2hpg, Regular};
 pub use d2hpg_principled::{
-    AbstractReward, Config as D2hpgPrincipledConfig, D2hpgPrincipled, Distance, Homomorphism,
-    LaxMetric, MetricReduction, RegularCritic, TransitionLoss, abstract_model_loss, gaussian_w2,
-    lax_loss,
+    AbstractReward, ActionMap, Config as D2hpgPrincipledConfig, D2hpgPrincipled, Distance,
+    Homomorphism, LaxMetric, MetricReduction, RegularCritic, TransitionLoss, TransitionStd,
+    abstract_model_loss, gaussian_w2, lax_loss,
 };
+pub use lifting::{LiftingConfig, LiftingNoise, LiftingSchedule, Reduction};
 pub use registry::{
     ALGORITHMS, Algorithm, AnyConfig, Registered, algorithm, names, names_where, paper_name,
     proposed, reference,

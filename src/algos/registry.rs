@@ -2,9 +2,7 @@
 //! `--algo` accepts, the messages that name them) generated from it.
 use std::marker::PhantomData;
 
-use super::agent::{
-    Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, FieldDoc, Role, toml_table,
-};
+use super::agent::{Agent, AgentSpec, AlgoConfig, AlgoError, AlgoInfo, FieldDoc, Role, toml_table};
 use super::{
     augmented_sac, bpql, d2hpg, d2hpg_principled, d2hpg_sac, delayed_sac, naive_sac, sac, vdpo,
 };
@@ -185,7 +183,7 @@ impl<C: AlgoConfig> Algorithm for Registered<C> {
                 valid: docs.iter().map(|d| d.name).collect::<Vec<_>>().join(", "),
             });
         }
-        let mut fields = toml_table(&C::for_protocol(protocol)?);
+        let mut fields = toml_table(&C::for_protocol(protocol));
         merge_tables(&mut fields, given.clone());
         let config: C = toml::Value::Table(fields).try_into().map_err(|e| {
             // Name the field: the first that fails on its own.

@@ -10,12 +10,12 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
 
+use dhrl::protocol::Protocol;
 use dhrl::sweep::{
     EXIT_BUSY, EXIT_INTERRUPTED, Experiment, PRESETS, RunOneResult, RunOutcome, RunState,
     SlurmOptions, Sweep, estimate_cost, run_group, run_local, shell_quote, stack_groups,
     steps_done, write_array_scripts, write_atomically,
 };
-use dhrl::protocol::Protocol;
 use dhrl::tasks::TaskName;
 
 #[derive(Subcommand)]
@@ -187,9 +187,10 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
         experiment.steps = steps;
     }
     if let Some(protocol) = args.protocol {
-        experiment
-            .train
-            .insert("protocol".into(), toml::Value::String(protocol.name().into()));
+        experiment.train.insert(
+            "protocol".into(),
+            toml::Value::String(protocol.name().into()),
+        );
     }
     if let Some(every) = args.eval_every {
         experiment.train.insert(

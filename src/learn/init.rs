@@ -159,6 +159,10 @@ mod tests {
             .iter()
             .map(|v| (v.abs() * 1e4) as i64)
             .collect::<std::collections::BTreeSet<_>>();
-        assert!(distinct.len() > 1000, "{} distinct magnitudes", distinct.len());
+        assert!(
+            distinct.len() > 1000,
+            "{} distinct magnitudes",
+            distinct.len()
+        );
     }
 }

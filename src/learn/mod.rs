@@ -3,6 +3,7 @@
 //! host-side noise so that runs are reproducible and resumable. The SAC family's networks are
 //! stacked ([`stack`]): one set of tensors serves S runs.
 
+mod clip;
 mod cpu_ops;
 mod device;
 mod init;
@@ -13,6 +14,7 @@ mod noise;
 mod stack;
 mod tensors;
 
+pub use clip::clip_norm_per_run;
 pub use cpu_ops::{adam, gelu, times_mask};
 #[cfg(feature = "wgpu-learner")]
 pub use device::real_gpu_adapters;

@@ -9,8 +9,8 @@ use super::normalised;
 use super::results::{Condition, RunResult, Variant, entries};
 use super::stats::mean_std;
 use crate::algos::{Role, names_where, paper_name};
-use crate::protocol::Protocol;
 use crate::charts::{CategorySeries, Labels, Line, category_chart, line_chart, svg_to_png};
+use crate::protocol::Protocol;
 use crate::tasks::TaskName;
 use crate::train::{curve_summary, plot_curves};
 
@@ -222,8 +222,7 @@ fn random_delay(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportEr
 /// D2HPG) per task and Δ, where the ablation-only one ran.
 fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> {
     let table: Vec<&RunResult> = runs.iter().filter(|r| r.condition.is_table1()).collect();
-    let ablation_only =
-        names_where(|info| info.role == Role::Ablation && info.in_lifting_ablation);
+    let ablation_only = names_where(|info| info.role == Role::Ablation && info.in_lifting_ablation);
     let cells: Vec<(TaskName, usize)> = table
         .iter()
         .filter(|r| ablation_only.contains(&r.algorithm))
@@ -247,7 +246,9 @@ fn ablation(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError>
                         .iter()
                         .copied()
                         .filter(|r| {
-                            r.task == task && r.is(algorithm, &variant) && r.condition.delay == delay
+                            r.task == task
+                                && r.is(algorithm, &variant)
+                                && r.condition.delay == delay
                         })
                         .collect();
                     normalised_mean(&at)
@@ -290,10 +291,7 @@ fn runtime(runs: &[RunResult], out: &Path) -> Result<Vec<PathBuf>, ReportError> 
                 .collect(),
         })
         .collect();
-    let categories: Vec<String> = algorithms
-        .iter()
-        .map(|(a, v)| entry_label(a, v))
-        .collect();
+    let categories: Vec<String> = algorithms.iter().map(|(a, v)| entry_label(a, v)).collect();
     let labels = Labels {
         title: "Wall-clock per 1M environment steps (this machine)",
         x: "algorithm",

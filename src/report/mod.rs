@@ -93,9 +93,7 @@ fn strata(
         .iter()
         .map(|&task| {
             runs.iter()
-                .filter(|r| {
-                    r.condition == *condition && r.is(algorithm, variant) && r.task == task
-                })
+                .filter(|r| r.condition == *condition && r.is(algorithm, variant) && r.task == task)
                 .map(|r| normalised(task, r.final_eval().1))
                 .collect()
         })
@@ -120,11 +118,9 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
         let tasks: Vec<TaskName> = TaskName::ALL
             .into_iter()
             .filter(|&t| {
-                entries.iter().all(|(a, v)| {
-                    runs.iter()
-                        .filter(under)
-                        .any(|r| r.is(a, v) && r.task == t)
-                })
+                entries
+                    .iter()
+                    .all(|(a, v)| runs.iter().filter(under).any(|r| r.is(a, v) && r.task == t))
             })
             .collect();
         if tasks.is_empty() {
@@ -155,7 +151,10 @@ pub fn aggregate(runs: &[RunResult], reps: usize) -> (Vec<IqmRow>, Vec<Improveme
         let proposed = proposed().name;
         let mut pairs = Vec::new();
         for ours in entries.iter().filter(|(a, _)| *a == proposed) {
-            for theirs in entries.iter().filter(|(a, v)| *a != proposed && *v == ours.1) {
+            for theirs in entries
+                .iter()
+                .filter(|(a, v)| *a != proposed && *v == ours.1)
+            {
                 pairs.push((ours, theirs));
             }
         }
@@ -245,15 +244,15 @@ fn aggregate_markdown(iqms: &[IqmRow], improvements: &[ImprovementRow], reps: us
 
 fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
     let mut out = String::from(
-        "statistic,delay,delay_kind,actuator_noise,algorithm,protocol,baseline,baseline_protocol,runs,value,low,high\n",
+        "statistic,delay,delay_kind,actuator_noise,algorithm,protocol,implementation,baseline,baseline_protocol,baseline_implementation,runs,value,low,high\n",
     );
     let condition = |c: &Condition| format!("{},{},{}", c.delay, c.delay_kind(), c.actuator_noise);
     for r in iqms {
         out += &format!(
-            "iqm,{},{},\"{}\",,,{},{:.6},{:.6},{:.6}\n",
+            "iqm,{},{},{},,,,{},{:.6},{:.6},{:.6}\n",
             condition(&r.condition),
             r.algorithm,
-            r.variant.label(),
+            r.variant.csv_fields(),
             r.runs,
             r.iqm,
             r.interval.0,
@@ -262,12 +261,12 @@ fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
     }
     for r in improvements {
         out += &format!(
-            "probability_of_improvement,{},{},\"{}\",{},\"{}\",,{:.6},{:.6},{:.6}\n",
+            "probability_of_improvement,{},{},{},{},{},,{:.6},{:.6},{:.6}\n",
             condition(&r.condition),
             r.algorithm,
-            r.variant.label(),
+            r.variant.csv_fields(),
             r.baseline,
-            r.baseline_variant.label(),
+            r.baseline_variant.csv_fields(),
             r.probability,
             r.interval.0,
             r.interval.1
@@ -279,14 +278,14 @@ fn aggregate_csv(iqms: &[IqmRow], improvements: &[ImprovementRow]) -> String {
 /// Every evaluation of every run, one row each: what pandas or rliable load directly.
 fn long_csv(runs: &[RunResult]) -> String {
     let mut out = String::from(
-        "algorithm,protocol,task,delay,delay_kind,actuator_noise,seed,step,return\n",
+        "algorithm,protocol,implementation,task,delay,delay_kind,actuator_noise,seed,step,return\n",
     );
     for r in runs {
         for e in &r.evals {
             out += &format!(
-                "{},\"{}\",{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{}\n",
                 r.algorithm,
-                r.variant.label(),
+                r.variant.csv_fields(),
                 r.task,
                 r.condition.delay,
                 r.condition.delay_kind(),

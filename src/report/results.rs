@@ -32,6 +32,13 @@ impl Variant {
             Some(code) => format!("{} ({code})", self.protocol),
         }
     }
+
+    /// Its two CSV fields, `protocol,implementation` (`dhrl` for dhrl's own code; commas in
+    /// an implementation's name become semicolons).
+    pub fn csv_fields(&self) -> String {
+        let code = self.implementation.as_deref().unwrap_or("dhrl");
+        format!("{},{}", self.protocol, code.replace(',', ";"))
+    }
 }
 
 /// The (algorithm, variant) pairs `runs` hold: algorithms in registry order, each one's
@@ -41,7 +48,10 @@ pub fn entries<'a>(runs: impl IntoIterator<Item = &'a RunResult>) -> Vec<(&'stat
         let order = names();
         runs.into_iter()
             .map(|r| {
-                let at = order.iter().position(|a| *a == r.algorithm).unwrap_or(usize::MAX);
+                let at = order
+                    .iter()
+                    .position(|a| *a == r.algorithm)
+                    .unwrap_or(usize::MAX);
                 (at, r.variant.implementation.clone(), r.variant.protocol)
             })
             .collect()

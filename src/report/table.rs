@@ -84,7 +84,9 @@ pub fn table1(runs: &[RunResult]) -> Table {
                     let cell: Vec<&&RunResult> = runs
                         .iter()
                         .filter(|r| {
-                            r.condition.delay == delay && r.is(algorithm, &variant) && r.task == task
+                            r.condition.delay == delay
+                                && r.is(algorithm, &variant)
+                                && r.task == task
                         })
                         .collect();
                     let finals: Vec<(u64, f64)> = cell.iter().map(|r| r.final_eval()).collect();
@@ -250,17 +252,14 @@ impl Table {
             "delay,algorithm,protocol,implementation,task,seeds,mean,std,final_step,best,mixed,paper_mean,paper_std\n",
         );
         for (delay, algorithm, variant, cells) in &self.rows {
-            let (protocol, implementation) = (
-                variant.protocol,
-                variant.implementation.as_deref().unwrap_or("dhrl").replace(',', ";"),
-            );
+            let variant = variant.csv_fields();
             for (task, (ours, paper)) in self.tasks.iter().zip(cells) {
                 let Some(c) = ours else { continue };
                 let (pm, ps) = paper.as_ref().map_or((String::new(), String::new()), |p| {
                     (p.mean.to_string(), p.std.to_string())
                 });
                 out += &format!(
-                    "{delay},{algorithm},{protocol},\"{implementation}\",{task},{},{:.3},{:.3},{},{},{},{pm},{ps}\n",
+                    "{delay},{algorithm},{variant},{task},{},{:.3},{:.3},{},{},{},{pm},{ps}\n",
                     c.seeds, c.mean, c.std, c.final_step, c.best, c.mixed
                 );
             }

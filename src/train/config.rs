@@ -102,8 +102,15 @@ impl Default for TrainConfig {
 
 impl TrainConfig {
     /// The defaults of `protocol`, with `algo`'s (the delay-free reference when `None`).
-    pub fn for_protocol(protocol: Protocol, algo: Option<&str>) -> Result<TrainConfig, ConfigError> {
-        let algo = AlgoSettings::under(protocol, algo.unwrap_or(reference().name), &toml::Table::new())?;
+    pub fn for_protocol(
+        protocol: Protocol,
+        algo: Option<&str>,
+    ) -> Result<TrainConfig, ConfigError> {
+        let algo = AlgoSettings::under(
+            protocol,
+            algo.unwrap_or(reference().name),
+            &toml::Table::new(),
+        )?;
         let dhrl = TrainConfig {
             protocol,
             algo,
@@ -260,7 +267,10 @@ impl TrainConfig {
             .map_err(|e| read_error(format!("the defaults do not serialise: {e}")))?;
         if let Some(toml::Value::String(name)) = table.get("algo") {
             let name = toml::Value::String(name.clone());
-            table.insert("algo".into(), toml::Value::Table(toml::Table::from_iter([("name".into(), name)])));
+            table.insert(
+                "algo".into(),
+                toml::Value::Table(toml::Table::from_iter([("name".into(), name)])),
+            );
         }
         merge_tables(&mut merged, table);
         let config: TrainConfig = toml::Value::Table(merged)

@@ -979,7 +979,8 @@ impl Trainer {
             if learning {
                 // One block of `update_every × updates_per_step` updates each time the step
                 // count passes a multiple of `update_every` (every step's share when it is 1).
-                let blocks = env_steps / c.update_every - (env_steps - c.envs as u64) / c.update_every;
+                let blocks =
+                    env_steps / c.update_every - (env_steps - c.envs as u64) / c.update_every;
                 let owed = (blocks * c.update_every) as f64 * c.updates_per_step;
                 for slot in &mut self.slots {
                     slot.state.update_debt += owed;
