@@ -11,7 +11,8 @@ Their code writes, per run, `{mode}_{agent}_{env}_delay{Δ}_seed{s}.txt` (one
   config.toml         the run as dhrl's authors protocol describes it: task, Δ, seed, steps,
                       the random phase (--start-step) and evaluation interval given here, and
                       the algorithm their agent type is (bpql -> d2hpg, sac -> d2hpg-sac,
-                      naive -> d2hpg-naive; principled is refused: dhrl has no authors' form);
+                      naive -> d2hpg-naive, principled -> d2hpg-principled, whose authors'
+                      protocol is their form: identity g, clamped-exp σ, mean NLL, clipping);
   evals.csv           step, wall seconds, mean return; their code logs neither the return's
                       spread over episodes (written nan) nor per-evaluation times (the run's
                       wall seconds spread over the evaluations in proportion to their step);
@@ -34,7 +35,8 @@ TASKS = {
     "Ant-v4": "ant",
     "Humanoid-v4": "humanoid",
 }
-AGENTS = {"bpql": "d2hpg", "sac": "d2hpg-sac", "naive": "d2hpg-naive"}
+AGENTS = {"bpql": "d2hpg", "sac": "d2hpg-sac", "naive": "d2hpg-naive",
+          "principled": "d2hpg-principled"}
 LOG = re.compile(r"^(?P<mode>[a-z]+)_(?P<agent>[a-z]+)_(?P<env>.+)_delay(?P<delay>\d+)_seed(?P<seed>\d+)\.txt$")
 
 

@@ -24,6 +24,11 @@ summary() {
 trap summary EXIT
 scripts/setup.sh
 stage_done "set-up (venv, MuJoCo)"
+# The documentation's relative links and anchors resolve, and the README's performance table
+# is what scripts/performance_table.py makes of the recorded runs (never edited by hand).
+.deps/venv/bin/python scripts/check_doc_links.py $(git ls-files '*.md')
+.deps/venv/bin/python scripts/performance_table.py --check
+stage_done "docs (links, performance table)"
 packages=()
 if [[ "${DHRL_SKIP_GPU_TESTS:-}" != 1 ]] && ! ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1; then
     packages+=(mesa-vulkan-drivers libvulkan1)

@@ -47,6 +47,8 @@ fn sac_clearly_beats_a_random_policy_on_inverted_pendulum() {
         "train",
         "--task",
         "inverted-pendulum",
+        "--algo",
+        "sac",
         "--steps",
         "3000",
         "--warmup-steps",
@@ -682,7 +684,10 @@ fn algorithm_fields_are_set_by_name_and_typos_list_the_fields() {
     assert!(
         out.status.code() == Some(1)
             && message.contains("no field `lifting_wieght`")
-            && message.contains("lifting_weight, lifting_samples"),
+            && ["lifting_weight", "lifting_schedule", "lifting_samples", "shared_temperature"]
+                .iter()
+                .all(|field| message.contains(&format!(" {field},")) || message.ends_with(field)
+                    || message.contains(&format!(" {field} "))),
         "{message}"
     );
     let out = dhrl(&["train", "--algo", "bpql", "--lifting-weight", "3"]);
@@ -849,6 +854,63 @@ fn train_arguments_resolve_in_order_and_resume_takes_only_steps() {
     );
 }
 
+/// Without flags, `dhrl train` is the main job: D2HPG on InvertedPendulum at Δ = 5. A delay
+/// option replaces that delay (it is not added to it), `--algo` takes its algorithm's defaults
+/// with Δ = 0, and a config file keeps what it says.
+#[test]
+fn the_main_job_is_d2hpg_under_delay_and_every_flag_replaces_its_part() {
+    use dhrl::delay::DelayArgs;
+    use dhrl::train::{MAIN_JOB_DELAY, TrainArgs};
+    let resolved = |args: TrainArgs| {
+        let c = args.config().unwrap();
+        let delay = (c.delay.observation_delay, c.delay.action_delay);
+        (c.task, c.algo.name().to_string(), delay)
+    };
+    let ip = dhrl::tasks::TaskName::InvertedPendulum;
+    assert_eq!(MAIN_JOB_DELAY, 5);
+    assert_eq!(
+        resolved(TrainArgs::default()),
+        (ip, "d2hpg".into(), (5, 0))
+    );
+    let delay = |delay: Option<i64>, action_delay: Option<i64>| DelayArgs {
+        delay,
+        action_delay,
+        ..DelayArgs::default()
+    };
+    let with_delay = |d: DelayArgs| TrainArgs {
+        delay: d,
+        ..TrainArgs::default()
+    };
+    assert_eq!(resolved(with_delay(delay(Some(3), None))), (ip, "d2hpg".into(), (3, 0)));
+    assert_eq!(
+        resolved(with_delay(delay(None, Some(2)))),
+        (ip, "d2hpg".into(), (0, 2)),
+        "an action delay alone is the whole delay"
+    );
+    let noisy = DelayArgs {
+        actuator_noise: Some(0.1),
+        ..DelayArgs::default()
+    };
+    assert_eq!(resolved(with_delay(noisy)), (ip, "d2hpg".into(), (5, 0)));
+    let sac = TrainArgs {
+        algo: Some("sac".into()),
+        ..TrainArgs::default()
+    };
+    assert_eq!(resolved(sac), (ip, "sac".into(), (0, 0)));
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("c.toml");
+    std::fs::write(&file, "seed = 7\n").unwrap();
+    let from_file = TrainArgs {
+        config: Some(file),
+        ..TrainArgs::default()
+    };
+    assert_eq!(
+        resolved(from_file),
+        (ip, "sac".into(), (0, 0)),
+        "a config file's missing fields are the library's defaults"
+    );
+}
+
 /// Every flag of `dhrl train` that sets a run's configuration is refused beside `--resume`,
 /// by name (none is silently ignored); clap's own list of the arguments drives the test, so a
 /// new flag without a sample value here fails it. A `--steps` below the run's own is refused
@@ -871,9 +933,11 @@ fn resume_refuses_every_other_setting_by_name_and_never_shortens_a_run() {
             "seed" | "envs" | "threads" | "eval-episodes" => "3",
             "seeds" => "0,1",
             "runs-per-pass" => "2",
-            "warmup-steps" | "eval-every" | "checkpoint-every" | "batch-size" => "64",
+            "warmup-steps" | "learning-starts" | "update-every" | "eval-every"
+            | "checkpoint-every" | "batch-size" => "64",
             "alpha" | "lifting-weight" => "0.5",
             "lifting-samples" => "4",
+            "protocol" => "authors",
             "device" | "delay-device" => "cpu",
             "config" => file.to_str().unwrap(),
             _ => return None,

@@ -234,6 +234,8 @@ fn sac_learns_inverted_pendulum_on_wgpu() {
         &[
             "--task",
             "inverted-pendulum",
+            "--algo",
+            "sac",
             "--device",
             "wgpu",
             "--steps",

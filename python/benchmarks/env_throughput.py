@@ -28,6 +28,9 @@ in the bounds too) rather than its default zeros, which would change the physics
 Run it from the repository root, with the built extension on the path:
 
     PYTHONPATH=python .deps/venv/bin/python python/benchmarks/env_throughput.py --tasks all --envs 256
+
+``--json`` prints one JSON object per row instead of the table; ``--json-out FILE`` appends those
+objects to FILE as well, beside the table (``scripts/bench_performance.sh`` records its rows so).
 """
 
 from __future__ import annotations
@@ -192,6 +195,10 @@ def main(argv: list[str] | None = None) -> int:
         help="largest copy count AsyncVectorEnv is run at (one process per copy)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object per row instead of the table")
+    parser.add_argument(
+        "--json-out", metavar="FILE",
+        help="also append one JSON object per row (as --json prints) to FILE, whatever is printed",
+    )
     args = parser.parse_args(argv)
     try:
         sizes = [int(n) for n in args.envs.split(",")]
@@ -257,6 +264,9 @@ def main(argv: list[str] | None = None) -> int:
                 "cpu": cpu_model(),
             }
             best_gym = max(v for v in (row["gym_sync"], row["gym_async"]) if v)
+            if args.json_out:
+                with open(args.json_out, "a", encoding="utf-8") as out:
+                    out.write(json.dumps(row) + "\n")
             if args.json:
                 print(json.dumps(row), flush=True)
             else:

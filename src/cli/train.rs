@@ -13,6 +13,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         eprintln!("run folder: {}", plan.run.display());
         let summary = train(&plan.config, &plan.run, plan.start, progress)?;
         println!("{}", describe(&summary));
+        eprintln!("{}", next_steps(&plan.run));
         return Ok(());
     };
     eprintln!(
@@ -31,6 +32,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             }
         }
     }
+    eprintln!("{}", next_steps(&plan.run));
     match (failed.len(), results.len()) {
         (0, _) => Ok(()),
         (n, total) if n == total => anyhow::bail!("all {n} runs failed ({})", failed.join(", ")),
@@ -39,6 +41,17 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             failed.join(", ")
         ),
     }
+}
+
+/// The closing line: where to look next.
+fn next_steps(run: &std::path::Path) -> String {
+    let run = run.display();
+    format!(
+        "next: {run} holds config.toml, evals.csv, train.csv and the checkpoint; \
+         `dhrl plot {run} --out curve.svg` draws the learning curve, \
+         `tensorboard --logdir {run}` shows every logged column, \
+         `dhrl eval {run}` scores the policy, `dhrl export {run}` writes it for deployment"
+    )
 }
 
 fn describe(summary: &TrainSummary) -> String {

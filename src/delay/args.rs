@@ -56,12 +56,17 @@ fn steps(flag: &'static str, value: Option<i64>) -> Result<Option<usize>, Negati
 impl DelayArgs {
     /// Whether any delay option was given.
     pub fn any(&self) -> bool {
+        self.sets_a_delay()
+            || self.actuator_noise.is_some()
+            || self.warmup.is_some()
+    }
+
+    /// Whether an option that sets the delay itself was given (not the noise or the warm-up).
+    pub fn sets_a_delay(&self) -> bool {
         self.delay.is_some()
             || self.action_delay.is_some()
             || self.random_delay
             || self.max_delay.is_some()
-            || self.actuator_noise.is_some()
-            || self.warmup.is_some()
     }
 
     /// The options laid over `base` (a config file's, or the default). Combinations are

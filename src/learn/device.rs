@@ -27,9 +27,9 @@ pub struct Devices {
 
 impl Devices {
     pub fn new(kind: LearnDevice) -> Result<Devices, LearnError> {
-        let mut software = false;
-        let plain = match kind {
-            LearnDevice::Cpu => Device::flex(),
+        // The device, and whether it is a software adapter.
+        let (plain, software) = match kind {
+            LearnDevice::Cpu => (Device::flex(), false),
             #[cfg(feature = "wgpu-learner")]
             LearnDevice::Wgpu => {
                 // One command stream for every thread. A learner is used from several
@@ -44,10 +44,9 @@ impl Devices {
                 );
                 let (real, all) = real_gpu_adapters();
                 if !real.is_empty() {
-                    Device::wgpu(burn::prelude::DeviceKind::DefaultDevice)
+                    (Device::wgpu(burn::prelude::DeviceKind::DefaultDevice), false)
                 } else if let Some(api) = software_opt_in()? {
-                    software = true;
-                    software_device(api)?
+                    (software_device(api)?, true)
                 } else {
                     return Err(LearnError::NoRealGpu {
                         found: if all.is_empty() {

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::{ConfigError, Start, TrainConfig, TrainError};
-use crate::algos::{AlgoError, AlgoSettings, names, parse_assignment};
+use crate::algos::{AlgoError, AlgoSettings, names, parse_assignment, proposed};
 use crate::delay::{DelayArgs, DelayDevice};
 use crate::learn::LearnDevice;
 use crate::protocol::Protocol;
@@ -28,7 +28,8 @@ pub struct TrainArgs {
     /// The MuJoCo task (Gymnasium v4).
     #[arg(long, value_enum)]
     pub task: Option<TaskName>,
-    /// The algorithm (`--help-config` lists its fields).
+    /// The algorithm (`--help-config` lists its fields). Default: d2hpg, the paper's method,
+    /// at --delay 5 unless a delay option is given (the main job; with --config, the file's).
     #[arg(long, value_parser = algo_names())]
     pub algo: Option<String>,
     /// Set a field of the algorithm's configuration (repeatable), e.g. --set lifting_weight=10.
@@ -193,7 +194,15 @@ impl TrainArgs {
     pub fn config(&self) -> Result<TrainConfig, TrainError> {
         let mut c = match &self.config {
             Some(path) => TrainConfig::from_toml_file(path, self.protocol)?,
-            None => TrainConfig::for_protocol(self.protocol.unwrap_or_default(), None)?,
+            // Without --algo, the paper's method; without a delay either, the main job's.
+            None => {
+                let protocol = self.protocol.unwrap_or_default();
+                match (&self.algo, self.delay.sets_a_delay()) {
+                    (None, false) => TrainConfig::main_job(protocol)?,
+                    (None, true) => TrainConfig::for_protocol(protocol, Some(proposed().name))?,
+                    (Some(_), _) => TrainConfig::for_protocol(protocol, None)?,
+                }
+            }
         };
         c.task = self.task.unwrap_or(c.task);
         c.algo = self.algo(c.algo)?;

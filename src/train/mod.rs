@@ -15,7 +15,7 @@ mod tensorboard;
 #[cfg(feature = "cli")]
 pub use args::{TrainArgs, TrainPlan};
 pub use checkpoint::has_checkpoint;
-pub use config::{ConfigError, TrainConfig};
+pub use config::{ConfigError, MAIN_JOB_DELAY, TrainConfig};
 #[cfg(feature = "cli")]
 pub use curves::plot_curves;
 pub use curves::{CurveSummary, EvalRow, curve_summary, read_evals, summarize_runs};

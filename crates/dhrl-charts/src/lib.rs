@@ -24,10 +24,17 @@ pub struct Labels<'a> {
     pub y: &'a str,
 }
 
+/// A point's spread as drawn: none where it is undefined (one seed's standard deviation, a
+/// log without the spread), so that the mean is still drawn and held by the axes.
+fn drawn_spread(spread: f64) -> f64 {
+    if spread.is_finite() { spread } else { 0.0 }
+}
+
 /// The y range holding every `mean ± spread`, with a margin.
 fn y_range(values: impl Iterator<Item = (f64, f64)>) -> std::ops::Range<f64> {
     let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
     for (m, s) in values {
+        let s = drawn_spread(s);
         low = low.min(m - s);
         high = high.max(m + s);
     }
@@ -110,8 +117,13 @@ pub fn line_chart(lines: &[Line], labels: &Labels, out: &Path) -> ChartResult {
         let band: Vec<(f64, f64)> = line
             .points
             .iter()
-            .map(|&(x, m, s)| (x, m + s))
-            .chain(line.points.iter().rev().map(|&(x, m, s)| (x, m - s)))
+            .map(|&(x, m, s)| (x, m + drawn_spread(s)))
+            .chain(
+                line.points
+                    .iter()
+                    .rev()
+                    .map(|&(x, m, s)| (x, m - drawn_spread(s))),
+            )
             .collect();
         chart.draw_series(std::iter::once(Polygon::new(
             band,
@@ -151,6 +163,7 @@ pub fn log_line_chart(
     };
     let (mut low, mut high) = reference.map_or((f64::INFINITY, 0.0), |(_, y)| (y, y));
     for &(_, mean, spread) in points() {
+        let spread = drawn_spread(spread);
         low = low.min((mean - spread).max(mean * 0.5));
         high = high.max(mean + spread);
     }
@@ -189,6 +202,7 @@ pub fn log_line_chart(
             .legend(legend_line(color, 2));
         chart.draw_series(means.into_iter().map(|p| Circle::new(p, 4, color.filled())))?;
         chart.draw_series(line.points.iter().map(|&(x, m, s)| {
+            let s = drawn_spread(s);
             PathElement::new(
                 vec![(x, (m - s).max(low)), (x, m + s)],
                 color.stroke_width(1),
@@ -305,4 +319,19 @@ pub fn svg_to_png(svg: &Path) -> Result<PathBuf, Box<dyn std::error::Error>> {
     let png = svg.with_extension("png");
     pixmap.save_png(&png)?;
     Ok(png)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A point without a defined spread (one seed) still sets the axis: a series of one seed
+    /// above every other series is drawn inside the chart, not clipped at its edge.
+    #[test]
+    fn a_point_without_a_spread_is_held_by_the_axis() {
+        let range = y_range([(0.0, 10.0), (287.6, f64::NAN), (-420.0, 80.0)].into_iter());
+        assert!(range.start < -500.0 && range.end > 287.6, "{range:?}");
+        let range = y_range([(5.0, f64::INFINITY)].into_iter());
+        assert!(range.start < 5.0 && range.end > 5.0, "{range:?}");
+    }
 }
