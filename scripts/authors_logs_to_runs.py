@@ -19,7 +19,10 @@ Their code writes, per run, `{mode}_{agent}_{env}_delay{Δ}_seed{s}.txt` (one
   implementation.txt  the code they came from, which `dhrl report` keeps apart from dhrl's.
 
 Usage: scripts/authors_logs_to_runs.py LOG_DIR... --out OUT --start-step N --eval-every N
-       [--commit 296ac7b]
+       --max-step N [--commit 296ac7b]
+
+`steps` is what the run reached (a run stopped early by SIGINT still writes its summary), the
+λ schedule's budget (`lifting_budget`) the --max-step it was started with.
 """
 import argparse
 import json
@@ -80,7 +83,7 @@ def convert(log: pathlib.Path, out: pathlib.Path, args) -> pathlib.Path:
             "",
             "[algo]",
             f'name = "{AGENTS[agent]}"',
-            *([f"lifting_budget = {steps}"] if agent != "naive" else []),
+            *([f"lifting_budget = {args.max_step}"] if agent != "naive" else []),
             "",
         ])
     )
@@ -102,6 +105,8 @@ def main():
     parser.add_argument("--out", required=True, type=pathlib.Path)
     parser.add_argument("--start-step", required=True, type=int, help="the runs' --start-step")
     parser.add_argument("--eval-every", required=True, type=int, help="the runs' --eval-freq")
+    parser.add_argument("--max-step", required=True, type=int,
+                        help="the runs' --max-step: the budget their λ schedule spans, also for a run cut short")
     parser.add_argument("--commit", default="296ac7b", help="the commit of their code that ran")
     args = parser.parse_args()
     logs = sorted(p for d in args.logs for p in d.glob("*.txt") if LOG.match(p.name))
