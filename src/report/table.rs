@@ -214,7 +214,7 @@ impl Table {
             out += &format!(
                 "{} & {name} & {}",
                 delay_label(*delay).replace('–', "--"),
-                variant.label().replace('\'', "'")
+                latex_text(&variant.label())
             );
             for (ours, paper) in cells {
                 let bold = |text: String, best: bool| {
@@ -287,6 +287,45 @@ impl Table {
 }
 
 /// A paper name in LaTeX: the paper sets the "2" of "D2" as a superscript.
+/// Text as LaTeX typesets it literally: its special characters escaped (an implementation's
+/// label is a user's own text, from implementation.txt).
+fn latex_text(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '\\' => out += "\\textbackslash{}",
+            '~' => out += "\\textasciitilde{}",
+            '^' => out += "\\textasciicircum{}",
+            '&' | '%' | '$' | '#' | '_' | '{' | '}' => {
+                out.push('\\');
+                out.push(c);
+            }
+            '–' => out += "--",
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
 fn latex_name(name: &str) -> String {
     name.replacen("D2", "D$^2$", 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::latex_text;
+
+    /// An implementation's own label reaches the LaTeX table literally: its special characters
+    /// escaped, a plain label unchanged.
+    #[test]
+    fn labels_are_escaped_for_latex() {
+        assert_eq!(
+            latex_text("authors (authors' code, JongsooLee/DHRL 296ac7b)"),
+            "authors (authors' code, JongsooLee/DHRL 296ac7b)"
+        );
+        assert_eq!(
+            latex_text(r"my_fork #2 & 50% {x} $\alpha$ ~^"),
+            r"my\_fork \#2 \& 50\% \{x\} \$\textbackslash{}alpha\$ \textasciitilde{}\textasciicircum{}"
+        );
+    }
 }
