@@ -684,10 +684,16 @@ fn algorithm_fields_are_set_by_name_and_typos_list_the_fields() {
     assert!(
         out.status.code() == Some(1)
             && message.contains("no field `lifting_wieght`")
-            && ["lifting_weight", "lifting_schedule", "lifting_samples", "shared_temperature"]
-                .iter()
-                .all(|field| message.contains(&format!(" {field},")) || message.ends_with(field)
-                    || message.contains(&format!(" {field} "))),
+            && [
+                "lifting_weight",
+                "lifting_schedule",
+                "lifting_samples",
+                "shared_temperature"
+            ]
+            .iter()
+            .all(|field| message.contains(&format!(" {field},"))
+                || message.ends_with(field)
+                || message.contains(&format!(" {field} "))),
         "{message}"
     );
     let out = dhrl(&["train", "--algo", "bpql", "--lifting-weight", "3"]);
@@ -868,10 +874,7 @@ fn the_main_job_is_d2hpg_under_delay_and_every_flag_replaces_its_part() {
     };
     let ip = dhrl::tasks::TaskName::InvertedPendulum;
     assert_eq!(MAIN_JOB_DELAY, 5);
-    assert_eq!(
-        resolved(TrainArgs::default()),
-        (ip, "d2hpg".into(), (5, 0))
-    );
+    assert_eq!(resolved(TrainArgs::default()), (ip, "d2hpg".into(), (5, 0)));
     let delay = |delay: Option<i64>, action_delay: Option<i64>| DelayArgs {
         delay,
         action_delay,
@@ -881,7 +884,10 @@ fn the_main_job_is_d2hpg_under_delay_and_every_flag_replaces_its_part() {
         delay: d,
         ..TrainArgs::default()
     };
-    assert_eq!(resolved(with_delay(delay(Some(3), None))), (ip, "d2hpg".into(), (3, 0)));
+    assert_eq!(
+        resolved(with_delay(delay(Some(3), None))),
+        (ip, "d2hpg".into(), (3, 0))
+    );
     assert_eq!(
         resolved(with_delay(delay(None, Some(2)))),
         (ip, "d2hpg".into(), (0, 2)),

@@ -56,9 +56,7 @@ fn steps(flag: &'static str, value: Option<i64>) -> Result<Option<usize>, Negati
 impl DelayArgs {
     /// Whether any delay option was given.
     pub fn any(&self) -> bool {
-        self.sets_a_delay()
-            || self.actuator_noise.is_some()
-            || self.warmup.is_some()
+        self.sets_a_delay() || self.actuator_noise.is_some() || self.warmup.is_some()
     }
 
     /// Whether an option that sets the delay itself was given (not the noise or the warm-up).

@@ -44,7 +44,10 @@ impl Devices {
                 );
                 let (real, all) = real_gpu_adapters();
                 if !real.is_empty() {
-                    (Device::wgpu(burn::prelude::DeviceKind::DefaultDevice), false)
+                    (
+                        Device::wgpu(burn::prelude::DeviceKind::DefaultDevice),
+                        false,
+                    )
                 } else if let Some(api) = software_opt_in()? {
                     (software_device(api)?, true)
                 } else {
