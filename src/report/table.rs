@@ -213,7 +213,7 @@ impl Table {
             let name = latex_name(paper_name(algorithm));
             out += &format!(
                 "{} & {name} & {}",
-                delay_label(*delay).replace('–', "--"),
+                latex_text(&delay_label(*delay)),
                 latex_text(&variant.label())
             );
             for (ours, paper) in cells {
@@ -286,7 +286,6 @@ impl Table {
     }
 }
 
-/// A paper name in LaTeX: the paper sets the "2" of "D2" as a superscript.
 /// Text as LaTeX typesets it literally: its special characters escaped (an implementation's
 /// label is a user's own text, from implementation.txt).
 fn latex_text(text: &str) -> String {
@@ -307,6 +306,7 @@ fn latex_text(text: &str) -> String {
     out
 }
 
+/// A paper name in LaTeX: the paper sets the "2" of "D2" as a superscript.
 fn latex_name(name: &str) -> String {
     name.replacen("D2", "D$^2$", 1)
 }
